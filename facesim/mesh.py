@@ -1,0 +1,181 @@
+"""The single-layer face mesh (thesis section 3.1.1): vertices, triangles and the
+topology derived from them.
+
+A :class:`FaceMesh` is a thin, immutable holder of two arrays; everything derived
+(unique edges, boundary loops, vertex neighbours, incident triangles, the mirror map) is
+computed on first use and cached read-only, in the spirit of trimesh.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
+
+
+def csr_from_pairs(rows: np.ndarray, cols: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Compressed-row lists: ``cols[start[i]:start[i+1]]`` are the entries of row ``i``.
+
+    rows, cols : (k,) int; returns start : (n+1,) int64, index : (k,) int64 sorted by row.
+    """
+    order = np.lexsort((cols, rows))
+    start = np.zeros(n + 1, dtype=np.int64)
+    np.add.at(start, rows + 1, 1)
+    return np.cumsum(start), cols[order].astype(np.int64)
+
+
+class FaceMesh:
+    """A triangle mesh of a face in centimetres, +x the subject's left, +y up, +z forward.
+
+    vertices : (n, 3) float64; faces : (t, 3) int64, counter-clockwise seen from +z.
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        self.vertices = _readonly(np.ascontiguousarray(vertices, dtype=np.float64))
+        self.faces = _readonly(np.ascontiguousarray(faces, dtype=np.int64))
+
+    @property
+    def vertex_count(self) -> int:
+        return len(self.vertices)
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """(e, 2) int64: unique undirected edges, smaller index first."""
+        e = np.sort(self.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        return _readonly(np.unique(e, axis=0))
+
+    @cached_property
+    def neighbours(self) -> tuple[np.ndarray, np.ndarray]:
+        """Vertex one-ring in compressed rows: (start (n+1,), index (2e,))."""
+        e = self.edges
+        rows = np.concatenate([e[:, 0], e[:, 1]])
+        cols = np.concatenate([e[:, 1], e[:, 0]])
+        start, index = csr_from_pairs(rows, cols, self.vertex_count)
+        return _readonly(start), _readonly(index)
+
+    @cached_property
+    def vertex_faces(self) -> tuple[np.ndarray, np.ndarray]:
+        """Triangles incident to each vertex in compressed rows: (start (n+1,), face (3t,))."""
+        rows = self.faces.reshape(-1)
+        cols = np.repeat(np.arange(len(self.faces)), 3)
+        start, index = csr_from_pairs(rows, cols, self.vertex_count)
+        return _readonly(start), _readonly(index)
+
+    @cached_property
+    def edge_face_count(self) -> np.ndarray:
+        """(e,) int64: how many triangles share each edge of :attr:`edges`."""
+        e = np.sort(self.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        _, counts = np.unique(e, axis=0, return_counts=True)
+        return _readonly(counts)
+
+    @cached_property
+    def boundary_loops(self) -> list[np.ndarray]:
+        """Closed loops of boundary edges (edges with one triangle), longest first."""
+        directed = self.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+        key = {tuple(sorted(d)) for d in map(tuple, self.edges[self.edge_face_count == 1])}
+        nxt = {int(a): int(b) for a, b in directed if tuple(sorted((a, b))) in key}
+        loops, seen = [], set()
+        for first in nxt:
+            if first in seen:
+                continue
+            loop, v = [], first
+            while v not in seen and v in nxt:
+                seen.add(v)
+                loop.append(v)
+                v = nxt[v]
+            loops.append(np.array(loop, dtype=np.int64))
+        return sorted(loops, key=len, reverse=True)
+
+    @cached_property
+    def face_normals(self) -> np.ndarray:
+        """(t, 3) unit normals by the right-hand rule."""
+        return _readonly(triangle_normals(self.vertices, self.faces))
+
+    @cached_property
+    def face_areas(self) -> np.ndarray:
+        v = self.vertices[self.faces]
+        return _readonly(0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1))
+
+    @cached_property
+    def scale(self) -> float:
+        """A size of the face in cm: the diagonal of its bounding box."""
+        return float(np.linalg.norm(np.ptp(self.vertices, axis=0)))
+
+    def connected_components(self) -> int:
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        e = self.edges
+        n = self.vertex_count
+        graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+        return int(connected_components(graph, directed=False)[0])
+
+
+def triangle_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    v = vertices[faces]
+    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.where(length > 0, length, 1.0)
+
+
+def mirror_map(vertices: np.ndarray, faces: np.ndarray | None = None) -> np.ndarray:
+    """The landmark mirror map of a face roughly symmetric about x = 0: ``vertices[m]`` is
+    the mirror image of ``vertices``.
+
+    Found as the optimal assignment of every vertex to the nearest reflected vertex and
+    checked to be an involution; given ``faces``, also checked to send every triangle to a
+    triangle. Raises ValueError when a check fails.
+    """
+    from scipy.optimize import linear_sum_assignment
+    from scipy.spatial.distance import cdist
+
+    reflected = vertices * np.array([-1.0, 1.0, 1.0])
+    _, m = linear_sum_assignment(cdist(vertices, reflected))
+    if not np.array_equal(m[m], np.arange(len(m))):
+        raise ValueError("mirror map is not an involution")
+    if faces is not None:
+        unmatched = len(mirror_mismatched_faces(faces, m))
+        if unmatched:
+            raise ValueError(f"mirror map sends {unmatched} triangles to non-triangles")
+    return m
+
+
+def mirror_mismatched_faces(faces: np.ndarray, mapping: np.ndarray) -> np.ndarray:
+    """Indices of triangles whose mirror image is not a triangle of the mesh."""
+    triangles = {tuple(sorted(t)) for t in faces.tolist()}
+    return np.array([i for i, t in enumerate(mapping[faces].tolist()) if tuple(sorted(t)) not in triangles], dtype=np.int64)
+
+
+def load_mesh(path: str | Path) -> FaceMesh:
+    """Read a face mesh (OBJ, PLY, GLB, anything trimesh reads) without reordering vertices."""
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: mesh file not found")
+    try:
+        loaded = trimesh.load(path, process=False, force="mesh")
+    except Exception as exc:  # trimesh raises many kinds for unreadable files
+        raise InputError(f"{path}: not a readable mesh ({exc})") from None
+    if len(loaded.faces) == 0:
+        raise InputError(f"{path}: mesh has no triangles")
+    return FaceMesh(np.asarray(loaded.vertices), np.asarray(loaded.faces))
+
+
+def write_obj(path: str | Path, mesh: FaceMesh, header: str = "") -> None:
+    """Write an OBJ with 6 decimals (1e-6 cm), atomically."""
+    from .writers import atomic_path
+
+    lines = [f"# {line}" for line in header.splitlines()]
+    lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in mesh.vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces]
+    with atomic_path(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")

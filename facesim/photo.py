@@ -1,0 +1,209 @@
+"""Build a neutral face mesh from one photograph with MediaPipe Face Mesh (offline).
+
+The 468 landmarks (no iris refinement) become the vertices and the tessellation's 852
+triangles the faces, so every mesh built here shares one topology and the default muscle
+file fits it by landmark index. Steps, each a function below:
+
+1. image coordinates to 3D: +x the subject's left, +y up, +z toward the viewer;
+2. frontalise: rotate so the plane of symmetry, fitted against the mesh's own mirror
+   image, is x = 0, and pitch so the area-weighted mean normal has no y component;
+3. scale to centimetres: the outer eye corners (33, 263) are put 8.9 cm apart, the adult
+   mean biocular width ex-ex (Farkas, "Anthropometry of the Head and Face": about 87 mm
+   in women, 91 mm in men);
+4. optionally symmetrise: average with the mirror image through the landmark mirror map;
+5. place the origin on the head's vertical axis (a cylinder fitted to the mask), y = 0 at
+   eye level, and orient every triangle toward +z.
+
+MediaPipe is an optional dependency (``pip install facesim[photo]``); nothing is
+downloaded at run time, its wheel carries the models.
+"""
+
+from __future__ import annotations
+
+import ast
+import inspect
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .mesh import FaceMesh, mirror_map, triangle_normals
+
+#: Outer eye corners (exocanthion) and their reference distance in cm.
+EYE_CORNERS = (33, 263)
+BIOCULAR_WIDTH_CM = 8.9
+#: Inner eye corners, whose mean height is y = 0.
+INNER_EYE_CORNERS = (133, 362)
+#: Pairs of landmarks known to mirror each other (eye corners, mouth corners, cheekbones):
+#: a first estimate of the symmetry plane, close enough for the full mirror map to be found.
+ANCHOR_PAIRS = np.array([(33, 263), (133, 362), (61, 291), (123, 352)])
+
+
+def tessellation() -> np.ndarray:
+    """(852, 3) triangles of MediaPipe's FACEMESH_TESSELATION.
+
+    The package exposes the tessellation as a frozenset of edges, which loses which edges
+    form a triangle; its source lists them as consecutive triples (a, b), (b, c), (c, a),
+    so the triangles are read back from that literal.
+    """
+    from mediapipe.python.solutions import face_mesh_connections as connections
+
+    for node in ast.parse(inspect.getsource(connections)).body:
+        if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "FACEMESH_TESSELATION":
+            edges = ast.literal_eval(node.value.args[0])
+            break
+    else:  # pragma: no cover - depends on the installed mediapipe
+        raise RuntimeError("FACEMESH_TESSELATION not found in mediapipe")
+    triples = np.array(edges, dtype=np.int64).reshape(-1, 3, 2)
+    if not (np.array_equal(triples[:, 0, 1], triples[:, 1, 0]) and np.array_equal(triples[:, 1, 1], triples[:, 2, 0])):
+        raise RuntimeError("FACEMESH_TESSELATION is not a list of triangles")
+    return triples[:, :, 0]
+
+
+def detect_landmarks(image: np.ndarray, source: str) -> np.ndarray:
+    """(468, 3) landmarks in pixels: x right, y down, z away from the camera (image-width units)."""
+    import mediapipe as mp
+
+    height, width = image.shape[:2]
+    with mp.solutions.face_mesh.FaceMesh(
+        static_image_mode=True, max_num_faces=1, refine_landmarks=False, min_detection_confidence=0.5
+    ) as face_mesh:
+        result = face_mesh.process(np.ascontiguousarray(image[:, :, :3]))
+    if not result.multi_face_landmarks:
+        raise InputError(f"{source}: no face found in the image")
+    landmarks = result.multi_face_landmarks[0].landmark
+    return np.array([(p.x * width, p.y * height, p.z * width) for p in landmarks], dtype=np.float64)
+
+
+def image_to_face_frame(landmarks: np.ndarray) -> np.ndarray:
+    """Pixels to the face frame: image right is the subject's left (+x), up is +y, and
+    MediaPipe's depth grows away from the camera, so +z (toward the viewer) is its negative."""
+    return landmarks * np.array([1.0, -1.0, -1.0])
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking unit vector a to unit vector b (Rodrigues)."""
+    v = np.cross(a, b)
+    c = float(np.dot(a, b))
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx / (1.0 + c)
+
+
+def frontalise(points: np.ndarray, faces: np.ndarray, iterations: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Rotate and translate so the plane of symmetry is x = 0.
+
+    Each pass pairs every landmark with its mirror (optimal assignment against the
+    reflected points), takes the plane's normal as the principal direction of the pair
+    differences and its offset from the pair midpoints, and rotates that normal onto +x.
+    Then it pitches about x so the mean normal lies along +z. Returns the points and the
+    mirror map of the last pass.
+    """
+    p = points - points.mean(axis=0)
+    mapping = np.arange(len(p))
+    mapping[ANCHOR_PAIRS[:, 0]], mapping[ANCHOR_PAIRS[:, 1]] = ANCHOR_PAIRS[:, 1], ANCHOR_PAIRS[:, 0]
+    for _ in range(iterations):
+        d = p - p[mapping]
+        normal = np.linalg.svd(d[np.linalg.norm(d, axis=1) > 0], full_matrices=False)[2][0]
+        normal *= np.sign(normal[0]) or 1.0
+        offset = float(np.mean((p + p[mapping]) / 2 @ normal))
+        p = (p - offset * normal) @ _rotation_between(normal, np.array([1.0, 0.0, 0.0])).T
+        mapping = mirror_map(p)
+    n = (triangle_normals(p, faces) * _areas(p, faces)[:, None]).sum(axis=0)
+    if n[2] < 0:
+        n = -n
+    angle = np.arctan2(n[1], n[2])
+    c, s = np.cos(angle), np.sin(angle)
+    pitch = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    return p @ pitch.T, mapping
+
+
+def _areas(p: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    v = p[faces]
+    return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+
+
+def symmetrise(points: np.ndarray, mapping: np.ndarray) -> np.ndarray:
+    """Average with the mirror image; midline landmarks land exactly on x = 0."""
+    mirrored = points[mapping] * np.array([-1.0, 1.0, 1.0])
+    return (points + mirrored) / 2
+
+
+def symmetric_tessellation(points: np.ndarray, faces: np.ndarray, mapping: np.ndarray) -> np.ndarray:
+    """The tessellation made mirror-symmetric.
+
+    MediaPipe's tessellation is symmetric but for three quads per side (at the lower
+    eyelid, the nostril and the upper lip) whose diagonals are mirrored the wrong way, so
+    no vertex map sends all its triangles to triangles. The right half (-x) is kept, the
+    left half is rebuilt as its mirror image, and triangles that the map sends to
+    themselves (across the midline) are kept: same vertices, same triangle count.
+    """
+    self_mapped = np.array([sorted(t) == sorted(mapping[t]) for t in faces.tolist()])
+    right = ~self_mapped & (points[faces, 0].sum(axis=1) < 0)
+    rebuilt = np.concatenate([faces[self_mapped], faces[right], mapping[faces[right]][:, ::-1]])
+    if len(rebuilt) != len(faces):
+        raise ValueError("the two halves of the tessellation differ in size")
+    return rebuilt
+
+
+def fit_vertical_axis(points: np.ndarray) -> tuple[float, float, float]:
+    """Least-squares circle through the (x, z) of the points (Kasa fit): the head's
+    vertical axis (cx, cz) and the radius R of the cylinder the face wraps around."""
+    x, z = points[:, 0], points[:, 2]
+    a = np.column_stack([x, z, np.ones_like(x)])
+    b, c, e = np.linalg.lstsq(a, x**2 + z**2, rcond=None)[0]
+    cx, cz = b / 2, c / 2
+    return float(cx), float(cz), float(np.sqrt(e + cx**2 + cz**2))
+
+
+def build_face_mesh(image: np.ndarray, source: str = "image", symmetric: bool = True) -> FaceMesh:
+    """The whole pipeline: a photo in, a frontal face mesh in centimetres out."""
+    faces = tessellation()
+    points = image_to_face_frame(detect_landmarks(image, source))
+    try:
+        points, mapping = frontalise(points, faces)
+    except ValueError as exc:
+        raise InputError(f"{source}: the detected face is too far from symmetric to frontalise ({exc})") from None
+    a, b = EYE_CORNERS
+    points *= BIOCULAR_WIDTH_CM / np.linalg.norm(points[a] - points[b])
+    if symmetric:
+        points = symmetrise(points, mapping)
+        faces = symmetric_tessellation(points, faces, mapping)
+        mirror_map(points, faces)  # the topology check: raises if a triangle has no mirror
+    cx, cz, _ = fit_vertical_axis(points)
+    points -= np.array([0.0 if symmetric else cx, points[list(INNER_EYE_CORNERS), 1].mean(), cz])
+    if (triangle_normals(points, faces) * _areas(points, faces)[:, None]).sum(axis=0)[2] < 0:
+        faces = faces[:, ::-1]
+    return FaceMesh(points, faces)
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    import imageio.v3 as iio
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: photo not found")
+    try:
+        image = iio.imread(path)
+    except Exception as exc:
+        raise InputError(f"{path}: not a readable image ({exc})") from None
+    if image.ndim == 2:
+        image = np.stack([image] * 3, axis=-1)
+    return np.asarray(image[:, :, :3], dtype=np.uint8)
+
+
+def mesh_from_photo(photo: str | Path, output: str | Path, symmetric: bool = True) -> FaceMesh:
+    """Build a mesh from a photo file and write it as OBJ."""
+    from .mesh import write_obj
+
+    try:
+        import mediapipe  # noqa: F401
+    except ImportError:
+        raise InputError("mesh from-photo needs MediaPipe: pip install -e '.[photo]' (or make mesh)") from None
+    mesh = build_face_mesh(read_image(photo), source=str(photo), symmetric=symmetric)
+    header = (
+        f"facesim face mesh built from {Path(photo).name} by facesim mesh from-photo\n"
+        f"468 MediaPipe Face Mesh landmarks, 852 triangles; cm, +x subject's left, +y up, +z forward\n"
+        f"symmetrised: {symmetric}"
+    )
+    write_obj(output, mesh, header=header)
+    return mesh
