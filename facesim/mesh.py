@@ -105,6 +105,11 @@ class FaceMesh:
         return _readonly(0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1))
 
     @cached_property
+    def vertical_axis(self) -> tuple[float, float, float]:
+        """(cx, cz, R): the head's vertical axis and radius, see :func:`fit_vertical_axis`."""
+        return fit_vertical_axis(self.vertices)
+
+    @cached_property
     def scale(self) -> float:
         """A size of the face in cm: the diagonal of its bounding box."""
         return float(np.linalg.norm(np.ptp(self.vertices, axis=0)))
@@ -152,6 +157,16 @@ def mirror_mismatched_faces(faces: np.ndarray, mapping: np.ndarray) -> np.ndarra
     """Indices of triangles whose mirror image is not a triangle of the mesh."""
     triangles = {tuple(sorted(t)) for t in faces.tolist()}
     return np.array([i for i, t in enumerate(mapping[faces].tolist()) if tuple(sorted(t)) not in triangles], dtype=np.int64)
+
+
+def fit_vertical_axis(points: np.ndarray) -> tuple[float, float, float]:
+    """Least-squares circle through the (x, z) of the points (Kåsa's fit): the head's
+    vertical axis (cx, cz) and the radius R of the cylinder the face wraps around."""
+    x, z = points[:, 0], points[:, 2]
+    a = np.column_stack([x, z, np.ones_like(x)])
+    b, c, e = np.linalg.lstsq(a, x**2 + z**2, rcond=None)[0]
+    cx, cz = b / 2, c / 2
+    return float(cx), float(cz), float(np.sqrt(e + cx**2 + cz**2))
 
 
 def load_mesh(path: str | Path) -> FaceMesh:

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .mesh import FaceMesh, mirror_map, triangle_normals
+from .mesh import FaceMesh, fit_vertical_axis, mirror_map, triangle_normals
 
 #: Outer eye corners (exocanthion) and their reference distance in cm.
 EYE_CORNERS = (33, 263)
@@ -143,16 +143,6 @@ def symmetric_tessellation(points: np.ndarray, faces: np.ndarray, mapping: np.nd
     if len(rebuilt) != len(faces):
         raise ValueError("the two halves of the tessellation differ in size")
     return rebuilt
-
-
-def fit_vertical_axis(points: np.ndarray) -> tuple[float, float, float]:
-    """Least-squares circle through the (x, z) of the points (Kasa fit): the head's
-    vertical axis (cx, cz) and the radius R of the cylinder the face wraps around."""
-    x, z = points[:, 0], points[:, 2]
-    a = np.column_stack([x, z, np.ones_like(x)])
-    b, c, e = np.linalg.lstsq(a, x**2 + z**2, rcond=None)[0]
-    cx, cz = b / 2, c / 2
-    return float(cx), float(cz), float(np.sqrt(e + cx**2 + cz**2))
 
 
 def build_face_mesh(image: np.ndarray, source: str = "image", symmetric: bool = True) -> FaceMesh:

@@ -1,0 +1,400 @@
+"""Numba kernels of the simulation (thesis chapter 3). Arrays and scalars in, outputs
+written into arrays passed last; no Python objects. One kernel per physical term:
+
+- ``_spring_terms``     non-linear springs, eq. 3.6 and the g of eq. 3.17
+- ``_repulsion_terms``  edge repulsion, eq. 3.7 and the h of eq. 3.17
+- ``_muscle_forces``    linear muscles, eq. 3.1-3.4, in the 2D projection of eq. 3.21,
+                        back-projected onto the mesh (eq. 3.22-3.25), over the region of
+                        influence found by the stack-based flood fill of section 3.3
+- ``_velocity_update``  the quasi-implicit per-vertex solve of eq. 3.19 (with the Δt on
+                        the spring and repulsion terms that the printed eq. 3.20 drops),
+                        viscous damping eq. 3.10, positions by eq. 3.16
+- ``_simulate``         predictor eq. 3.14 and the above, for every sub-step of every
+                        frame (Algorithm 3.4.1), with per-frame diagnostics.
+
+The velocity solve, for vertex i with predicted positions X* = X + Δt V (eq. 3.14):
+
+    V' = (m V + Δt T + Δt Σ_j g_ij (X_i - X_j*) + Δt Σ_k h_ik (X_i - P_k*))
+         / (m + Δt c - Δt² (Σ_j g_ij + Σ_k h_ik))
+
+``_spring_terms`` and ``_repulsion_terms`` accumulate the sums of g and h (``stiff``) and
+of the g (X_i - X_j*) and h (X_i - P_k*) products (``pull``; it also carries the
+edge-repulsion reactions, explicitly).
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .config import LENGTH_EPS, NEGLIGIBLE_DELTA, NUMBA_OPTIONS
+
+#: Status codes returned by ``_simulate``.
+OK, NOT_FINITE, INVERTED, RUNAWAY = 0, 1, 2, 3
+
+
+@njit(**NUMBA_OPTIONS)
+def _power(base, exponent):
+    """base ** exponent, by repeated squaring when the exponent is a whole number (the
+    thesis's γ = ζ = 5): several times faster than the general pow in the inner loops."""
+    if exponent == math.floor(exponent) and 0.0 <= exponent <= 64.0:
+        result = 1.0
+        e = int(exponent)
+        while e > 0:
+            if e & 1:
+                result *= base
+            base *= base
+            e >>= 1
+        return result
+    return base**exponent
+
+
+@njit(**NUMBA_OPTIONS)
+def _nonlinear_coefficient(length, rest, k0, exponent):
+    """-(1 + (|X| - d)²)^γ k0 (|X| - d) / |X|: the g of eq. 3.17 (h with ζ)."""
+    stretch = length - rest
+    return -_power(1.0 + stretch * stretch, exponent) * k0 * stretch / max(length, LENGTH_EPS)
+
+
+@njit(**NUMBA_OPTIONS)
+def _spring_terms(x, xp, spring_indices, spring_rest_length, k0, gamma, stiff, pull):
+    """Springs on the mesh edges, eq. 3.6, evaluated at the predicted positions xp."""
+    for s in range(spring_indices.shape[0]):
+        i = spring_indices[s, 0]
+        j = spring_indices[s, 1]
+        dx = xp[i, 0] - xp[j, 0]
+        dy = xp[i, 1] - xp[j, 1]
+        dz = xp[i, 2] - xp[j, 2]
+        g = _nonlinear_coefficient(math.sqrt(dx * dx + dy * dy + dz * dz), spring_rest_length[s], k0, gamma)
+        stiff[i] += g
+        stiff[j] += g
+        for d in range(3):
+            pull[i, d] += g * (x[i, d] - xp[j, d])
+            pull[j, d] += g * (x[j, d] - xp[i, d])
+
+
+@njit(**NUMBA_OPTIONS)
+def _tissue_terms(x, rest_position, tissue, stiff, pull):
+    """Hypodermis springs: each vertex tied to its rest position with stiffness k_t, the
+    soft tissue that attaches skin to bone. Not in the thesis (tissue = 0 is its model);
+    a spring mesh has no bending stiffness, so under muscle pull it wrinkles and creeps
+    without ever settling, and these springs give every mode a restoring force."""
+    for i in range(x.shape[0]):
+        stiff[i] -= tissue
+        for d in range(3):
+            pull[i, d] -= tissue * (x[i, d] - rest_position[i, d])
+
+
+@njit(**NUMBA_OPTIONS)
+def _foot_on_edge(xp, i, a, b, out):
+    """P_k of eq. 3.7: the projection of vertex i onto the line through edge (a, b).
+    Writes P into ``out`` and returns its parameter t (P = a + t (b - a))."""
+    ex = xp[b, 0] - xp[a, 0]
+    ey = xp[b, 1] - xp[a, 1]
+    ez = xp[b, 2] - xp[a, 2]
+    t = ((xp[i, 0] - xp[a, 0]) * ex + (xp[i, 1] - xp[a, 1]) * ey + (xp[i, 2] - xp[a, 2]) * ez) / max(
+        ex * ex + ey * ey + ez * ez, LENGTH_EPS
+    )
+    out[0] = xp[a, 0] + t * ex
+    out[1] = xp[a, 1] + t * ey
+    out[2] = xp[a, 2] + t * ez
+    return t
+
+
+@njit(**NUMBA_OPTIONS)
+def _repulsion_terms(x, xp, repulsion_vertex, repulsion_edge, repulsion_rest_distance, k0, zeta, stiff, pull):
+    """Edge repulsion, eq. 3.7: each vertex is held at its rest altitude above the
+    opposite edge of each of its triangles.
+
+    R_ik acts on the vertex (implicitly, through h in the velocity solve) and its
+    reaction -R_ik on the edge's ends, split (1 - t) : t by where the foot P_k lies. The
+    thesis leaves the reaction out, but without it the term is not conservative and a
+    perturbed face at rest never settles (measured: kinetic energy grows); with it the
+    term derives from a potential in the point-to-line distance.
+    """
+    foot = np.empty(3)
+    for r in range(repulsion_vertex.shape[0]):
+        i = repulsion_vertex[r]
+        a = repulsion_edge[r, 0]
+        b = repulsion_edge[r, 1]
+        t = _foot_on_edge(xp, i, a, b, foot)
+        dx = xp[i, 0] - foot[0]
+        dy = xp[i, 1] - foot[1]
+        dz = xp[i, 2] - foot[2]
+        h = _nonlinear_coefficient(math.sqrt(dx * dx + dy * dy + dz * dz), repulsion_rest_distance[r], k0, zeta)
+        stiff[i] += h
+        pull[i, 0] += h * (x[i, 0] - foot[0])
+        pull[i, 1] += h * (x[i, 1] - foot[1])
+        pull[i, 2] += h * (x[i, 2] - foot[2])
+        wa = -(1.0 - t) * h
+        wb = -t * h
+        pull[a, 0] += wa * dx
+        pull[a, 1] += wa * dy
+        pull[a, 2] += wa * dz
+        pull[b, 0] += wb * dx
+        pull[b, 1] += wb * dy
+        pull[b, 2] += wb * dz
+
+
+@njit(**NUMBA_OPTIONS)
+def _project_uv(xp, axis_x, axis_z, radius, uv):
+    """Eq. 3.21 with u scaled to arc length: u = R atan2(x - cx, z - cz), v = y (cm).
+    Written as 3D points (u, v, 0) so the falloff code serves both frames."""
+    for i in range(xp.shape[0]):
+        uv[i, 0] = radius * math.atan2(xp[i, 0] - axis_x, xp[i, 2] - axis_z)
+        uv[i, 1] = xp[i, 1]
+        uv[i, 2] = 0.0
+
+
+@njit(**NUMBA_OPTIONS)
+def _falloff(ox, oy, oz, ix, iy, iz, px, py, pz, cos_zone, r, r_max):
+    """δ = δ_A δ_R of eq. 3.2-3.4 for point P, muscle O -> I (2D points have z = 0)."""
+    oix = ix - ox
+    oiy = iy - oy
+    oiz = iz - oz
+    opx = px - ox
+    opy = py - oy
+    opz = pz - oz
+    dist = math.sqrt(opx * opx + opy * opy + opz * opz)
+    length = math.sqrt(oix * oix + oiy * oiy + oiz * oiz)
+    if dist < LENGTH_EPS or dist > r_max:
+        return 0.0
+    cos_beta = (oix * opx + oiy * opy + oiz * opz) / (length * dist)
+    if cos_beta < cos_zone:
+        return 0.0
+    angular = (cos_beta - cos_zone) / (1.0 - cos_zone)
+    if dist <= r:
+        radial = math.cos(0.5 * math.pi * (r - dist) / r)
+    else:
+        radial = math.cos(0.5 * math.pi * (dist - r) / (r_max - r))
+    return angular * radial
+
+
+@njit(**NUMBA_OPTIONS)
+def _back_project(i, fu, fv, uv, xp, neighbour_start, neighbour_index, ring_start, ring_a, ring_b, out):
+    """Eq. 3.22-3.25: carry the 2D force (fu, fv) at vertex i onto the mesh.
+
+    The one-ring triangle (i, a, b) whose 2D wedge contains the force is found by writing
+    the force in the basis of its two 2D edges, f = α e_a + β e_b with α, β ≥ 0; the same
+    combination of the 3D edges lies in the triangle's plane and projects to a vector
+    parallel to f. Its length is set to |f|. A force that leaves the mesh (a vertex on a
+    boundary pulled outward) keeps only its component along the boundary edge closest in
+    direction. Returns False, leaving ``out`` zero, when no edge points along it.
+    """
+    out[0] = 0.0
+    out[1] = 0.0
+    out[2] = 0.0
+    magnitude = math.sqrt(fu * fu + fv * fv)
+    if magnitude == 0.0:
+        return False
+    for k in range(ring_start[i], ring_start[i + 1]):
+        a = ring_a[k]
+        b = ring_b[k]
+        au = uv[a, 0] - uv[i, 0]
+        av = uv[a, 1] - uv[i, 1]
+        bu = uv[b, 0] - uv[i, 0]
+        bv = uv[b, 1] - uv[i, 1]
+        det = au * bv - av * bu
+        if abs(det) < LENGTH_EPS:
+            continue
+        alpha = (fu * bv - fv * bu) / det
+        beta = (au * fv - av * fu) / det
+        if alpha >= 0.0 and beta >= 0.0:
+            for d in range(3):
+                out[d] = alpha * (xp[a, d] - xp[i, d]) + beta * (xp[b, d] - xp[i, d])
+            scale = magnitude / max(math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2), LENGTH_EPS)
+            for d in range(3):
+                out[d] *= scale
+            return True
+    best = 0.0
+    best_j = -1
+    for k in range(neighbour_start[i], neighbour_start[i + 1]):
+        j = neighbour_index[k]
+        eu = uv[j, 0] - uv[i, 0]
+        ev = uv[j, 1] - uv[i, 1]
+        cosine = (eu * fu + ev * fv) / max(math.sqrt(eu * eu + ev * ev) * magnitude, LENGTH_EPS)
+        if cosine > best:
+            best = cosine
+            best_j = j
+    if best_j < 0:
+        return False
+    length = 0.0
+    for d in range(3):
+        out[d] = xp[best_j, d] - xp[i, d]
+        length += out[d] ** 2
+    scale = best * magnitude / max(math.sqrt(length), LENGTH_EPS)
+    for d in range(3):
+        out[d] *= scale
+    return True
+
+
+@njit(**NUMBA_OPTIONS)
+def _muscle_forces(
+    frame, xp, activation, muscle_origin, muscle_insertion_point, muscle_insertion, muscle_cos_zone,
+    muscle_r, muscle_r_max, muscle_force, pinned, neighbour_start, neighbour_index, ring_start, ring_a,
+    ring_b, uv_projection, force, visited, stamp, stack,
+):
+    """Eq. 3.1-3.4 over each active muscle's region of influence, found by the
+    stack-based flood fill of section 3.3: start at the insertion, and push the neighbours
+    of a vertex only when its δ is not negligible.
+
+    ``frame`` holds the points the muscles act in: the 2D projection (u, v, 0) of eq. 3.21
+    when ``uv_projection``, with the forces then back-projected onto the mesh, or the 3D
+    positions themselves. ``muscle_origin`` and ``muscle_insertion_point`` are O and I at
+    rest in that frame. ``visited[i] == stamp`` marks vertex i as pushed for the current
+    muscle; returns the next free stamp. ``force`` is accumulated into, (n, 3).
+    """
+    f3 = np.empty(3)
+    for m in range(muscle_origin.shape[0]):
+        a_m = activation[m]
+        if a_m == 0.0:
+            continue
+        stamp += 1
+        top = 0
+        stack[0] = muscle_insertion[m]
+        visited[muscle_insertion[m]] = stamp
+        while top >= 0:
+            i = stack[top]
+            top -= 1
+            delta = _falloff(muscle_origin[m, 0], muscle_origin[m, 1], muscle_origin[m, 2],
+                             muscle_insertion_point[m, 0], muscle_insertion_point[m, 1], muscle_insertion_point[m, 2],
+                             frame[i, 0], frame[i, 1], frame[i, 2], muscle_cos_zone[m], muscle_r[m], muscle_r_max[m])
+            if delta <= NEGLIGIBLE_DELTA:
+                continue
+            if not pinned[i]:
+                magnitude = a_m * muscle_force[m] * delta
+                length = 0.0
+                for d in range(3):
+                    f3[d] = muscle_origin[m, d] - frame[i, d]
+                    length += f3[d] ** 2
+                scale = magnitude / max(math.sqrt(length), LENGTH_EPS)  # eq. 3.1
+                if uv_projection:
+                    _back_project(i, scale * f3[0], scale * f3[1], frame, xp,
+                                  neighbour_start, neighbour_index, ring_start, ring_a, ring_b, f3)
+                else:
+                    for d in range(3):
+                        f3[d] *= scale
+                for d in range(3):
+                    force[i, d] += f3[d]
+            for k in range(neighbour_start[i], neighbour_start[i + 1]):
+                j = neighbour_index[k]
+                if visited[j] != stamp:
+                    visited[j] = stamp
+                    top += 1
+                    stack[top] = j
+    return stamp
+
+
+@njit(**NUMBA_OPTIONS)
+def _velocity_update(x, v, force, stiff, pull, mass, damping, dt, pinned, v_out):
+    """Eq. 3.19 solved for V' per vertex (see the module docstring). Compressed springs
+    make g positive and shrink the denominator; it is kept at least m, the inertia of the
+    explicit update, so it never reaches zero."""
+    for i in range(x.shape[0]):
+        if pinned[i]:
+            v_out[i, 0] = 0.0
+            v_out[i, 1] = 0.0
+            v_out[i, 2] = 0.0
+            continue
+        denominator = max(mass + dt * damping - dt * dt * stiff[i], mass)
+        for d in range(3):
+            v_out[i, d] = (mass * v[i, d] + dt * force[i, d] + dt * pull[i, d]) / denominator
+
+
+@njit(**NUMBA_OPTIONS)
+def _triangle_checks(x, faces, rest_normal, rest_area):
+    """Inverted triangles (normal against the rest normal), the first of them, and the
+    smallest area relative to rest."""
+    inverted = 0
+    first = -1
+    smallest = np.inf
+    for t in range(faces.shape[0]):
+        a = faces[t, 0]
+        b = faces[t, 1]
+        c = faces[t, 2]
+        ux = x[b, 0] - x[a, 0]
+        uy = x[b, 1] - x[a, 1]
+        uz = x[b, 2] - x[a, 2]
+        wx = x[c, 0] - x[a, 0]
+        wy = x[c, 1] - x[a, 1]
+        wz = x[c, 2] - x[a, 2]
+        nx = uy * wz - uz * wy
+        ny = uz * wx - ux * wz
+        nz = ux * wy - uy * wx
+        if nx * rest_normal[t, 0] + ny * rest_normal[t, 1] + nz * rest_normal[t, 2] <= 0.0:
+            inverted += 1
+            if first < 0:
+                first = t
+        smallest = min(smallest, 0.5 * math.sqrt(nx * nx + ny * ny + nz * nz) / rest_area[t])
+    return inverted, first, smallest
+
+
+@njit(**NUMBA_OPTIONS)
+def _simulate(
+    faces, rest_normal, rest_area, pinned, neighbour_start, neighbour_index, ring_start, ring_a, ring_b,
+    spring_indices, spring_rest_length, repulsion_vertex, repulsion_edge, repulsion_rest_distance,
+    muscle_origin, muscle_insertion_point, muscle_insertion, muscle_cos_zone, muscle_r, muscle_r_max, muscle_force,
+    axis_x, axis_z, radius, rest_position, mass, damping, k0, gamma, zeta, tissue, edge_repulsion, uv_projection,
+    activations, dt, substeps, energy_limit, stop_on_inversion,
+    x, v, positions, kinetic_energy, inverted, smallest_area,
+):
+    """Algorithm 3.4.1: ``substeps`` steps of Δt / substeps per frame, for every row of
+    ``activations`` (frames, muscles). x and v (n, 3) are the state, advanced in place.
+
+    Writes positions (frames, n, 3) and per-frame diagnostics. Returns (status, frame,
+    element): OK, or the first frame that is NOT_FINITE (element: a vertex), INVERTED
+    (a triangle; only when ``stop_on_inversion``) or RUNAWAY (kinetic energy above
+    ``energy_limit``).
+    """
+    n = x.shape[0]
+    h = dt / substeps
+    xp = np.empty_like(x)
+    frame = np.empty_like(x)
+    v_new = np.empty_like(v)
+    force = np.empty_like(x)
+    pull = np.empty_like(x)
+    stiff = np.empty(n)
+    visited = np.zeros(n, dtype=np.int64)
+    stack = np.empty(n, dtype=np.int64)
+    stamp = 0
+    for f in range(activations.shape[0]):
+        for _ in range(substeps):
+            for i in range(n):
+                for d in range(3):
+                    xp[i, d] = x[i, d] if pinned[i] else x[i, d] + h * v[i, d]  # eq. 3.14
+            stiff[:] = 0.0
+            pull[:] = 0.0
+            force[:] = 0.0
+            _spring_terms(x, xp, spring_indices, spring_rest_length, k0, gamma, stiff, pull)
+            if tissue > 0.0:
+                _tissue_terms(x, rest_position, tissue, stiff, pull)
+            if edge_repulsion:
+                _repulsion_terms(x, xp, repulsion_vertex, repulsion_edge, repulsion_rest_distance, k0, zeta, stiff, pull)
+            if uv_projection:
+                _project_uv(xp, axis_x, axis_z, radius, frame)
+            else:
+                frame[:] = xp
+            stamp = _muscle_forces(frame, xp, activations[f], muscle_origin, muscle_insertion_point, muscle_insertion,
+                                   muscle_cos_zone, muscle_r, muscle_r_max, muscle_force, pinned, neighbour_start,
+                                   neighbour_index, ring_start, ring_a, ring_b, uv_projection, force, visited, stamp, stack)
+            _velocity_update(x, v, force, stiff, pull, mass, damping, h, pinned, v_new)
+            for i in range(n):
+                for d in range(3):
+                    v[i, d] = v_new[i, d]
+                    x[i, d] += h * v[i, d]  # eq. 3.16
+        energy = 0.0
+        for i in range(n):
+            for d in range(3):
+                if not math.isfinite(x[i, d]) or not math.isfinite(v[i, d]):
+                    return NOT_FINITE, f, i
+                energy += 0.5 * mass * v[i, d] * v[i, d]
+                positions[f, i, d] = x[i, d]
+        count, first, smallest = _triangle_checks(x, faces, rest_normal, rest_area)
+        kinetic_energy[f] = energy
+        inverted[f] = count
+        smallest_area[f] = smallest
+        if count > 0 and stop_on_inversion:
+            return INVERTED, f, first
+        if energy > energy_limit:
+            return RUNAWAY, f, -1
+    return OK, -1, -1

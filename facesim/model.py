@@ -1,0 +1,164 @@
+"""Building the immutable simulation model from a mesh, its muscles and a material.
+
+``build_model`` collects everything the kernels need as contiguous read-only arrays
+(in the spirit of warp.sim's ModelBuilder.finalize): springs on the unique edges with
+their rest lengths (eq. 3.6), edge-repulsion pairs (eq. 3.7: each vertex against the
+opposite edge of each of its triangles, rest distance the triangle's altitude), the
+pinned vertices, neighbour and one-ring lists in compressed rows, and the muscles' rest
+geometry in the frame they act in (the 2D projection of eq. 3.21, or 3D when the
+projection is switched off). Per-step state (positions, velocities) lives elsewhere.
+
+The 2D projection needs the head's vertical axis and a radius to turn the angle u into a
+length: both come from a cylinder fitted to the mesh, so no face needs them by hand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydantic import Field
+
+from .mesh import FaceMesh, csr_from_pairs
+from .muscles import MuscleSet
+from .schema import Strict
+
+
+class Material(Strict):
+    """Mass-spring-damper parameters (thesis section 3.1.3)."""
+
+    mass: float = Field(1.0, gt=0, description="point mass m of every vertex")
+    stiffness: float = Field(1000.0, gt=0, description="spring stiffness k0, eq. 3.6 and 3.7")
+    nonlinearity: float = Field(5.0, ge=0, description="spring non-linearity γ, eq. 3.6")
+    repulsion_nonlinearity: float = Field(5.0, ge=0, description="edge-repulsion non-linearity ζ, eq. 3.7")
+    damping: float = Field(40.0, ge=0, description="viscous damping c, eq. 3.10")
+    tissue: float = Field(300.0, ge=0, description="hypodermis springs tying skin to bone (not in the thesis, where it is 0)")
+    substeps: int = Field(4, ge=1, le=1000, description="integration steps per frame (each Δt / substeps)")
+    edge_repulsion: bool = Field(True, description="edge repulsion (eq. 3.7); off reproduces the thesis's fig. 3.16")
+    uv_projection: bool = Field(True, description="muscle forces in the 2D projection (eq. 3.21-3.25); off: in 3D")
+
+
+@dataclass(frozen=True)
+class Model:
+    """Arrays of one face, ready for the kernels. Shapes: n vertices, t triangles,
+    s springs, r repulsion pairs, M muscles."""
+
+    rest_position: np.ndarray  # (n, 3)
+    faces: np.ndarray  # (t, 3)
+    rest_normal: np.ndarray  # (t, 3) unit
+    rest_area: np.ndarray  # (t,)
+    pinned: np.ndarray  # (n,) bool
+    neighbour_start: np.ndarray  # (n+1,)
+    neighbour_index: np.ndarray  # (2s,)
+    ring_start: np.ndarray  # (n+1,) one-ring triangles (i, ring_a, ring_b), counter-clockwise
+    ring_a: np.ndarray  # (3t,)
+    ring_b: np.ndarray  # (3t,)
+    spring_indices: np.ndarray  # (s, 2)
+    spring_rest_length: np.ndarray  # (s,)
+    repulsion_vertex: np.ndarray  # (r,)
+    repulsion_edge: np.ndarray  # (r, 2)
+    repulsion_rest_distance: np.ndarray  # (r,)
+    muscle_origin: np.ndarray  # (M, 3) attachment O at rest, in the muscle frame
+    muscle_insertion_point: np.ndarray  # (M, 3) insertion I at rest, in the muscle frame
+    muscle_insertion: np.ndarray  # (M,) vertex of I, where the flood fill starts
+    muscle_cos_zone: np.ndarray  # (M,) cos α
+    muscle_r: np.ndarray  # (M,) r of eq. 3.3 (cm)
+    muscle_r_max: np.ndarray  # (M,) r_max of eq. 3.3 (cm)
+    muscle_force: np.ndarray  # (M,) peak force f
+    axis_x: float
+    axis_z: float
+    radius: float
+    material: Material
+    muscles: MuscleSet
+    scale: float  # bounding-box diagonal of the face, cm
+
+    @property
+    def vertex_count(self) -> int:
+        return len(self.rest_position)
+
+    @property
+    def muscle_count(self) -> int:
+        return len(self.muscle_force)
+
+    def kernel_arrays(self) -> tuple:
+        """The model's arrays in the order ``kernels._simulate`` takes them."""
+        m = self.material
+        return (
+            self.faces, self.rest_normal, self.rest_area, self.pinned, self.neighbour_start, self.neighbour_index,
+            self.ring_start, self.ring_a, self.ring_b, self.spring_indices, self.spring_rest_length,
+            self.repulsion_vertex, self.repulsion_edge, self.repulsion_rest_distance, self.muscle_origin,
+            self.muscle_insertion_point, self.muscle_insertion, self.muscle_cos_zone, self.muscle_r,
+            self.muscle_r_max, self.muscle_force, self.axis_x, self.axis_z, self.radius, self.rest_position,
+            m.mass, m.damping, m.stiffness, m.nonlinearity, m.repulsion_nonlinearity, m.tissue,
+            m.edge_repulsion, m.uv_projection,
+        )
+
+
+def project_uv(points: np.ndarray, axis_x: float, axis_z: float, radius: float) -> np.ndarray:
+    """Eq. 3.21 with u as arc length on the fitted cylinder: (R atan2(x - cx, z - cz), y, 0)."""
+    u = radius * np.arctan2(points[:, 0] - axis_x, points[:, 2] - axis_z)
+    return np.column_stack([u, points[:, 1], np.zeros(len(points))])
+
+
+def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Material()) -> Model:
+    x = mesh.vertices
+    faces = mesh.faces
+    edges = mesh.edges
+    n = mesh.vertex_count
+
+    a, b, c = faces[:, 0], faces[:, 1], faces[:, 2]
+    ring_start, order = csr_from_pairs(faces.reshape(-1), np.arange(3 * len(faces)), n)
+    ring_a = np.stack([b, c, a], axis=1).reshape(-1)[order]
+    ring_b = np.stack([c, a, b], axis=1).reshape(-1)[order]
+
+    repulsion_vertex = faces.reshape(-1)
+    repulsion_edge = np.stack([np.stack([b, c], 1), np.stack([c, a], 1), np.stack([a, b], 1)], axis=1).reshape(-1, 2)
+    opposite = np.linalg.norm(x[repulsion_edge[:, 1]] - x[repulsion_edge[:, 0]], axis=1)
+    altitude = 2 * np.repeat(mesh.face_areas, 3) / opposite
+
+    pinned = np.zeros(n, dtype=bool)
+    pinned[muscles.pinned] = True
+
+    axis_x, axis_z, radius = mesh.vertical_axis
+    muscle_frame = project_uv(x, axis_x, axis_z, radius) if material.uv_projection else x
+    origin = muscle_frame[muscles.attachment]
+    insertion = muscle_frame[muscles.insertion]
+    length = np.linalg.norm(insertion - origin, axis=1)
+
+    start, index = mesh.neighbours
+    arrays = dict(
+        rest_position=x,
+        faces=faces,
+        rest_normal=mesh.face_normals,
+        rest_area=mesh.face_areas,
+        pinned=pinned,
+        neighbour_start=start,
+        neighbour_index=index,
+        ring_start=ring_start,
+        ring_a=ring_a,
+        ring_b=ring_b,
+        spring_indices=edges,
+        spring_rest_length=np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1),
+        repulsion_vertex=repulsion_vertex,
+        repulsion_edge=repulsion_edge,
+        repulsion_rest_distance=altitude,
+        muscle_origin=origin,
+        muscle_insertion_point=insertion,
+        muscle_insertion=muscles.insertion,
+        muscle_cos_zone=np.cos(muscles.zone),
+        muscle_r=muscles.falloff[:, 0] * length,
+        muscle_r_max=muscles.falloff[:, 1] * length,
+        muscle_force=muscles.force,
+    )
+    return Model(
+        **{key: _frozen(value) for key, value in arrays.items()},
+        axis_x=axis_x, axis_z=axis_z, radius=radius, material=material, muscles=muscles, scale=mesh.scale,
+    )
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    """A contiguous read-only copy in the kernels' dtypes (bool, int64 or float64)."""
+    dtype = bool if a.dtype == bool else np.int64 if a.dtype.kind in "iu" else np.float64
+    a = np.array(a, dtype=dtype, order="C")
+    a.flags.writeable = False
+    return a

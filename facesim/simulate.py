@@ -1,0 +1,132 @@
+"""Running a spec: model, activation table, the Numba simulation, diagnostics.
+
+``simulate(spec)`` is the one entry point: it builds (and caches) the model of the spec's
+mesh, muscles and material, turns the spec into a (frames, muscles) activation table,
+runs ``kernels._simulate`` and wraps the result in an :class:`Animation`. A simulation
+that blows up raises :class:`SimulationError` naming the frame and the vertex or triangle.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from . import kernels
+from .errors import SimulationError
+from .mesh import FaceMesh, load_mesh
+from .model import Material, Model, build_model
+from .muscles import MuscleSet, load_muscles
+from .spec import Spec, activation_table
+
+#: A run is "runaway" when its kinetic energy exceeds that of every vertex crossing a
+#: tenth of the face in one frame: far beyond any expression, short of overflow.
+RUNAWAY_FRACTION = 0.1
+
+
+@dataclass(frozen=True)
+class Animation:
+    """The result of a simulation.
+
+    positions : (frames, n, 3) cm; rest : (n, 3); faces : (t, 3);
+    activations : (frames, M); kinetic_energy, smallest_area : (frames,) float;
+    inverted : (frames,) int (triangles facing against their rest normal).
+    """
+
+    name: str
+    positions: np.ndarray
+    rest: np.ndarray
+    faces: np.ndarray
+    activations: np.ndarray
+    muscle_names: tuple[str, ...]
+    dt: float
+    fps: float
+    kinetic_energy: np.ndarray
+    inverted: np.ndarray
+    smallest_area: np.ndarray
+    seconds: float = 0.0
+    model: Model | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def frames(self) -> int:
+        return len(self.positions)
+
+    @property
+    def active_muscles(self) -> tuple[str, ...]:
+        return tuple(n for n, a in zip(self.muscle_names, self.activations.max(axis=0)) if a > 0)
+
+
+@lru_cache(maxsize=8)
+def _mesh_and_muscles(mesh_path: Path, muscles_path: Path) -> tuple[FaceMesh, MuscleSet]:
+    mesh = load_mesh(mesh_path)
+    return mesh, load_muscles(muscles_path, mesh)
+
+
+@lru_cache(maxsize=8)
+def _model(mesh_path: Path, muscles_path: Path, material: Material) -> Model:
+    return build_model(*_mesh_and_muscles(mesh_path, muscles_path), material)
+
+
+def model_for(spec: Spec) -> Model:
+    """The (cached) model of a spec's mesh, muscles and material."""
+    return _model(spec.mesh_path.resolve(), spec.muscles_path.resolve(), spec.material)
+
+
+def run(
+    model: Model,
+    activations: np.ndarray,
+    dt: float,
+    stop_on_inversion: bool = True,
+    source: str = "simulation",
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Simulate ``activations`` (frames, M) from rest. Returns positions, kinetic energy,
+    inverted-triangle counts and smallest relative areas per frame."""
+    frames = len(activations)
+    n = model.vertex_count
+    x = model.rest_position.copy()
+    v = np.zeros_like(x)
+    positions = np.empty((frames, n, 3))
+    energy = np.zeros(frames)
+    inverted = np.zeros(frames, dtype=np.int64)
+    smallest = np.zeros(frames)
+    frame_speed = RUNAWAY_FRACTION * model.scale / dt
+    energy_limit = 0.5 * model.material.mass * n * frame_speed**2
+    status, frame, element = kernels._simulate(
+        *model.kernel_arrays(), np.ascontiguousarray(activations, dtype=np.float64), float(dt),
+        int(model.material.substeps), energy_limit, stop_on_inversion,
+        x, v, positions, energy, inverted, smallest,
+    )
+    if status == kernels.NOT_FINITE:
+        raise SimulationError(f"{source}: simulation diverged at frame {frame}: vertex {element} is not finite", frame)
+    if status == kernels.INVERTED:
+        raise SimulationError(f"{source}: simulation failed at frame {frame}: triangle {element} inverted", frame)
+    if status == kernels.RUNAWAY:
+        raise SimulationError(f"{source}: simulation diverged at frame {frame}: runaway kinetic energy {energy[frame]:.3g}", frame)
+    return positions, energy, inverted, smallest
+
+
+def simulate(spec: Spec, stop_on_inversion: bool = True) -> Animation:
+    """Simulate an expression spec from the neutral face."""
+    model = model_for(spec)
+    table = activation_table(spec, model.muscles)
+    start = time.perf_counter()
+    positions, energy, inverted, smallest = run(model, table, spec.dt, stop_on_inversion, spec.source)
+    seconds = time.perf_counter() - start
+    return Animation(
+        name=spec.title,
+        positions=positions,
+        rest=model.rest_position,
+        faces=model.faces,
+        activations=table,
+        muscle_names=model.muscles.names,
+        dt=spec.dt,
+        fps=spec.fps,
+        kinetic_energy=energy,
+        inverted=inverted,
+        smallest_area=smallest,
+        seconds=seconds,
+        model=model,
+    )
