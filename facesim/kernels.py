@@ -229,20 +229,51 @@ def _back_project(i, fu, fv, uv, xp, neighbour_start, neighbour_index, ring_star
 
 
 @njit(**NUMBA_OPTIONS)
+def _region_of_influence(
+    m, frame, muscle_origin, muscle_insertion_point, muscle_insertion, muscle_cos_zone, muscle_r, muscle_r_max,
+    neighbour_start, neighbour_index, visited, stamp, stack, region, delta,
+):
+    """The stack-based flood fill of section 3.3 for muscle m: start at the insertion,
+    pop a vertex, evaluate its δ (eq. 3.4), and push its neighbours only when δ is not
+    negligible. Writes the region's vertices and their δ into ``region`` and ``delta``
+    and returns how many there are. ``visited[i] == stamp`` marks vertex i as pushed."""
+    count = 0
+    top = 0
+    stack[0] = muscle_insertion[m]
+    visited[muscle_insertion[m]] = stamp
+    while top >= 0:
+        i = stack[top]
+        top -= 1
+        d = _falloff(muscle_origin[m, 0], muscle_origin[m, 1], muscle_origin[m, 2],
+                     muscle_insertion_point[m, 0], muscle_insertion_point[m, 1], muscle_insertion_point[m, 2],
+                     frame[i, 0], frame[i, 1], frame[i, 2], muscle_cos_zone[m], muscle_r[m], muscle_r_max[m])
+        if d <= NEGLIGIBLE_DELTA:
+            continue
+        region[count] = i
+        delta[count] = d
+        count += 1
+        for k in range(neighbour_start[i], neighbour_start[i + 1]):
+            j = neighbour_index[k]
+            if visited[j] != stamp:
+                visited[j] = stamp
+                top += 1
+                stack[top] = j
+    return count
+
+
+@njit(**NUMBA_OPTIONS)
 def _muscle_forces(
     frame, xp, activation, muscle_origin, muscle_insertion_point, muscle_insertion, muscle_cos_zone,
     muscle_r, muscle_r_max, muscle_force, pinned, neighbour_start, neighbour_index, ring_start, ring_a,
-    ring_b, uv_projection, force, visited, stamp, stack,
+    ring_b, uv_projection, force, visited, stamp, stack, region, delta,
 ):
-    """Eq. 3.1-3.4 over each active muscle's region of influence, found by the
-    stack-based flood fill of section 3.3: start at the insertion, and push the neighbours
-    of a vertex only when its δ is not negligible.
+    """Eq. 3.1 on every vertex of each active muscle's region of influence.
 
     ``frame`` holds the points the muscles act in: the 2D projection (u, v, 0) of eq. 3.21
-    when ``uv_projection``, with the forces then back-projected onto the mesh, or the 3D
+    when ``uv_projection``, the forces then back-projected onto the mesh, or the 3D
     positions themselves. ``muscle_origin`` and ``muscle_insertion_point`` are O and I at
-    rest in that frame. ``visited[i] == stamp`` marks vertex i as pushed for the current
-    muscle; returns the next free stamp. ``force`` is accumulated into, (n, 3).
+    rest in that frame. ``force`` (n, 3) is accumulated into; ``visited``, ``stack``,
+    ``region`` and ``delta`` are (n,) workspaces. Returns the next free stamp.
     """
     f3 = np.empty(3)
     for m in range(muscle_origin.shape[0]):
@@ -250,38 +281,26 @@ def _muscle_forces(
         if a_m == 0.0:
             continue
         stamp += 1
-        top = 0
-        stack[0] = muscle_insertion[m]
-        visited[muscle_insertion[m]] = stamp
-        while top >= 0:
-            i = stack[top]
-            top -= 1
-            delta = _falloff(muscle_origin[m, 0], muscle_origin[m, 1], muscle_origin[m, 2],
-                             muscle_insertion_point[m, 0], muscle_insertion_point[m, 1], muscle_insertion_point[m, 2],
-                             frame[i, 0], frame[i, 1], frame[i, 2], muscle_cos_zone[m], muscle_r[m], muscle_r_max[m])
-            if delta <= NEGLIGIBLE_DELTA:
+        count = _region_of_influence(m, frame, muscle_origin, muscle_insertion_point, muscle_insertion,
+                                     muscle_cos_zone, muscle_r, muscle_r_max, neighbour_start, neighbour_index,
+                                     visited, stamp, stack, region, delta)
+        for k in range(count):
+            i = region[k]
+            if pinned[i]:
                 continue
-            if not pinned[i]:
-                magnitude = a_m * muscle_force[m] * delta
-                length = 0.0
+            length = 0.0
+            for d in range(3):
+                f3[d] = muscle_origin[m, d] - frame[i, d]
+                length += f3[d] ** 2
+            scale = a_m * muscle_force[m] * delta[k] / max(math.sqrt(length), LENGTH_EPS)  # eq. 3.1
+            if uv_projection:
+                _back_project(i, scale * f3[0], scale * f3[1], frame, xp,
+                              neighbour_start, neighbour_index, ring_start, ring_a, ring_b, f3)
+            else:
                 for d in range(3):
-                    f3[d] = muscle_origin[m, d] - frame[i, d]
-                    length += f3[d] ** 2
-                scale = magnitude / max(math.sqrt(length), LENGTH_EPS)  # eq. 3.1
-                if uv_projection:
-                    _back_project(i, scale * f3[0], scale * f3[1], frame, xp,
-                                  neighbour_start, neighbour_index, ring_start, ring_a, ring_b, f3)
-                else:
-                    for d in range(3):
-                        f3[d] *= scale
-                for d in range(3):
-                    force[i, d] += f3[d]
-            for k in range(neighbour_start[i], neighbour_start[i + 1]):
-                j = neighbour_index[k]
-                if visited[j] != stamp:
-                    visited[j] = stamp
-                    top += 1
-                    stack[top] = j
+                    f3[d] *= scale
+            for d in range(3):
+                force[i, d] += f3[d]
     return stamp
 
 
@@ -356,6 +375,8 @@ def _simulate(
     stiff = np.empty(n)
     visited = np.zeros(n, dtype=np.int64)
     stack = np.empty(n, dtype=np.int64)
+    region = np.empty(n, dtype=np.int64)
+    delta = np.empty(n)
     stamp = 0
     for f in range(activations.shape[0]):
         for _ in range(substeps):
@@ -376,7 +397,8 @@ def _simulate(
                 frame[:] = xp
             stamp = _muscle_forces(frame, xp, activations[f], muscle_origin, muscle_insertion_point, muscle_insertion,
                                    muscle_cos_zone, muscle_r, muscle_r_max, muscle_force, pinned, neighbour_start,
-                                   neighbour_index, ring_start, ring_a, ring_b, uv_projection, force, visited, stamp, stack)
+                                   neighbour_index, ring_start, ring_a, ring_b, uv_projection, force, visited, stamp, stack,
+                                   region, delta)
             _velocity_update(x, v, force, stiff, pull, mass, damping, h, pinned, v_new)
             for i in range(n):
                 for d in range(3):

@@ -1,0 +1,163 @@
+"""Slow, obviously correct NumPy versions of every simulation kernel, written from the
+thesis's equations without looking at the Numba loops: vectorised where that is clearer,
+brute force where the kernels are clever (the region of influence is a connected
+component of a full scan instead of a flood fill). Tests compare the kernels to these.
+"""
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from facesim.config import NEGLIGIBLE_DELTA
+
+
+def nonlinear(length, rest, k0, exponent):
+    """g (or h) of eq. 3.17."""
+    stretch = length - rest
+    return -((1 + stretch**2) ** exponent) * k0 * stretch / length
+
+
+def spring_terms(x, xp, springs, rest, k0, gamma):
+    """Σ_j g_ij and Σ_j g_ij (X_i - X_j*) per vertex (eq. 3.6, 3.17)."""
+    i, j = springs[:, 0], springs[:, 1]
+    g = nonlinear(np.linalg.norm(xp[i] - xp[j], axis=1), rest, k0, gamma)
+    stiff = np.zeros(len(x))
+    pull = np.zeros_like(x)
+    np.add.at(stiff, i, g)
+    np.add.at(stiff, j, g)
+    np.add.at(pull, i, g[:, None] * (x[i] - xp[j]))
+    np.add.at(pull, j, g[:, None] * (x[j] - xp[i]))
+    return stiff, pull
+
+
+def repulsion_terms(x, xp, vertex, edge, rest, k0, zeta):
+    """Σ_k h_ik and Σ_k h_ik (X_i - P_k*) per vertex (eq. 3.7, 3.17), plus the reactions
+    -R_ik on the edge ends split by the foot's position."""
+    a, b = xp[edge[:, 0]], xp[edge[:, 1]]
+    e = b - a
+    t = ((xp[vertex] - a) * e).sum(1) / (e * e).sum(1)
+    foot = a + t[:, None] * e
+    h = nonlinear(np.linalg.norm(xp[vertex] - foot, axis=1), rest, k0, zeta)
+    stiff = np.zeros(len(x))
+    pull = np.zeros_like(x)
+    np.add.at(stiff, vertex, h)
+    np.add.at(pull, vertex, h[:, None] * (x[vertex] - foot))
+    reaction = -h[:, None] * (xp[vertex] - foot)
+    np.add.at(pull, edge[:, 0], (1 - t)[:, None] * reaction)
+    np.add.at(pull, edge[:, 1], t[:, None] * reaction)
+    return stiff, pull
+
+
+def tissue_terms(x, rest_position, tissue):
+    return np.full(len(x), -tissue), -tissue * (x - rest_position)
+
+
+def project_uv(x, cx, cz, radius):
+    """Eq. 3.21, u as arc length."""
+    return np.column_stack([radius * np.arctan2(x[:, 0] - cx, x[:, 2] - cz), x[:, 1], np.zeros(len(x))])
+
+
+def falloff(origin, insertion, points, cos_zone, r, r_max):
+    """δ of eq. 3.2-3.4 for every point."""
+    oi = insertion - origin
+    op = points - origin
+    dist = np.linalg.norm(op, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos_beta = op @ oi / (dist * np.linalg.norm(oi))
+        angular = np.where(cos_beta >= cos_zone, (cos_beta - cos_zone) / (1 - cos_zone), 0.0)
+        radial = np.where(
+            dist <= r,
+            np.cos(np.pi / 2 * (r - dist) / r),
+            np.where(dist <= r_max, np.cos(np.pi / 2 * (dist - r) / (r_max - r)), 0.0),
+        )
+    return np.where(dist > 0, angular * radial, 0.0)
+
+
+def region_of_influence(delta, insertion, edges, n):
+    """Vertices with δ above negligible that connect to the insertion through such
+    vertices: a brute-force scan, then a connected component."""
+    inside = delta > NEGLIGIBLE_DELTA
+    if not inside[insertion]:
+        return np.zeros(0, dtype=int)
+    keep = inside[edges[:, 0]] & inside[edges[:, 1]]
+    e = edges[keep]
+    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    return np.flatnonzero(inside & (label == label[insertion]))
+
+
+def back_project(i, force_2d, uv, x, faces, edges):
+    """Eq. 3.22-3.25 by the affine map of the one-ring triangle whose 2D wedge holds the
+    force; along the closest edge when none does."""
+    magnitude = np.linalg.norm(force_2d[:2])
+    for face in faces[(faces == i).any(axis=1)]:
+        k = list(face).index(i)
+        a, b = face[(k + 1) % 3], face[(k + 2) % 3]
+        basis = np.column_stack([uv[a, :2] - uv[i, :2], uv[b, :2] - uv[i, :2]])
+        if abs(np.linalg.det(basis)) < 1e-12:
+            continue
+        alpha, beta = np.linalg.solve(basis, force_2d[:2])
+        if alpha >= 0 and beta >= 0:
+            f3 = alpha * (x[a] - x[i]) + beta * (x[b] - x[i])
+            return f3 * magnitude / np.linalg.norm(f3)
+    neighbours = np.unique(np.concatenate([edges[edges[:, 0] == i, 1], edges[edges[:, 1] == i, 0]]))
+    directions = uv[neighbours, :2] - uv[i, :2]
+    cosine = directions @ force_2d[:2] / (np.linalg.norm(directions, axis=1) * magnitude)
+    best = np.argmax(cosine)
+    if cosine[best] <= 0:
+        return np.zeros(3)
+    edge = x[neighbours[best]] - x[i]
+    return edge / np.linalg.norm(edge) * cosine[best] * magnitude
+
+
+def muscle_forces(model, xp, activation):
+    """Eq. 3.1-3.4 on every vertex of every active muscle's region."""
+    force = np.zeros_like(xp)
+    use_uv = model.material.uv_projection
+    frame = project_uv(xp, model.axis_x, model.axis_z, model.radius) if use_uv else xp
+    edges = model.spring_indices
+    for m in np.flatnonzero(activation):
+        origin = model.muscle_origin[m]
+        delta = falloff(origin, model.muscle_insertion_point[m], frame, model.muscle_cos_zone[m],
+                        model.muscle_r[m], model.muscle_r_max[m])
+        for i in region_of_influence(delta, model.muscle_insertion[m], edges, len(xp)):
+            if model.pinned[i]:
+                continue
+            direction = origin - frame[i]
+            f = activation[m] * model.muscle_force[m] * delta[i] * direction / np.linalg.norm(direction)
+            force[i] += back_project(i, f, frame, xp, model.faces, edges) if use_uv else f
+    return force
+
+
+def step(model, x, v, activation, h):
+    """One step: predictor eq. 3.14, forces at the prediction, eq. 3.19 solved for V'
+    (denominator kept at least m), positions eq. 3.16."""
+    mat = model.material
+    free = ~model.pinned
+    xp = np.where(free[:, None], x + h * v, x)
+    stiff, pull = spring_terms(x, xp, model.spring_indices, model.spring_rest_length, mat.stiffness, mat.nonlinearity)
+    if mat.tissue > 0:
+        s, p = tissue_terms(x, model.rest_position, mat.tissue)
+        stiff, pull = stiff + s, pull + p
+    if mat.edge_repulsion:
+        s, p = repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance,
+                               mat.stiffness, mat.repulsion_nonlinearity)
+        stiff, pull = stiff + s, pull + p
+    force = muscle_forces(model, xp, activation)
+    denominator = np.maximum(mat.mass + h * mat.damping - h * h * stiff, mat.mass)
+    v_new = (mat.mass * v + h * force + h * pull) / denominator[:, None]
+    v_new[~free] = 0
+    return x + h * v_new, v_new
+
+
+def simulate(model, activations, dt):
+    """Every frame's positions, ``substeps`` steps per frame."""
+    x = model.rest_position.copy()
+    v = np.zeros_like(x)
+    h = dt / model.material.substeps
+    out = []
+    for row in activations:
+        for _ in range(model.material.substeps):
+            x, v = step(model, x, v, row, h)
+        out.append(x.copy())
+    return np.array(out)

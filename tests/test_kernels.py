@@ -1,0 +1,208 @@
+"""Every Numba kernel against its NumPy reference in tests/naive.py, on perturbed states,
+with the switches on and off, including degenerate inputs."""
+
+import numpy as np
+import pytest
+
+import naive
+from conftest import material, spec
+from facesim import kernels as K
+from facesim.simulate import model_for, run
+from facesim.spec import activation_table
+
+RTOL = 1e-9
+
+
+def perturbed(model, rng, scale=0.2):
+    x = model.rest_position + scale * rng.standard_normal(model.rest_position.shape)
+    xp = x + 0.05 * rng.standard_normal(x.shape)
+    return x, xp
+
+
+def assert_close(actual, expected, rtol=RTOL):
+    scale = max(np.abs(expected).max(), 1e-300)
+    assert np.abs(actual - expected).max() <= rtol * scale
+
+
+def test_springs_match_reference(model, rng):
+    x, xp = perturbed(model, rng)
+    m = model.material
+    stiff, pull = np.zeros(len(x)), np.zeros_like(x)
+    K._spring_terms(x, xp, model.spring_indices, model.spring_rest_length, m.stiffness, m.nonlinearity, stiff, pull)
+    ref_stiff, ref_pull = naive.spring_terms(x, xp, model.spring_indices, model.spring_rest_length, m.stiffness, m.nonlinearity)
+    assert_close(stiff, ref_stiff)
+    assert_close(pull, ref_pull)
+
+
+@pytest.mark.parametrize("zeta", [5.0, 2.5, 0.0])
+def test_edge_repulsion_matches_reference(model, rng, zeta):
+    x, xp = perturbed(model, rng)
+    k0 = model.material.stiffness
+    stiff, pull = np.zeros(len(x)), np.zeros_like(x)
+    K._repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance, k0, zeta, stiff, pull)
+    ref_stiff, ref_pull = naive.repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge,
+                                                model.repulsion_rest_distance, k0, zeta)
+    assert_close(stiff, ref_stiff)
+    assert_close(pull, ref_pull)
+
+
+def test_edge_repulsion_is_zero_at_rest(model):
+    x = model.rest_position.copy()
+    stiff, pull = np.zeros(len(x)), np.zeros_like(x)
+    K._repulsion_terms(x, x, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance, 1000.0, 5.0, stiff, pull)
+    assert np.abs(pull).max() < 1e-9
+
+
+def test_tissue_matches_reference(model, rng):
+    x, _ = perturbed(model, rng)
+    stiff, pull = np.zeros(len(x)), np.zeros_like(x)
+    K._tissue_terms(x, model.rest_position, 300.0, stiff, pull)
+    ref_stiff, ref_pull = naive.tissue_terms(x, model.rest_position, 300.0)
+    assert_close(stiff, ref_stiff)
+    assert_close(pull, ref_pull)
+
+
+def test_uv_projection_matches_reference(model, rng):
+    x, _ = perturbed(model, rng)
+    uv = np.empty_like(x)
+    K._project_uv(x, model.axis_x, model.axis_z, model.radius, uv)
+    assert_close(uv, naive.project_uv(x, model.axis_x, model.axis_z, model.radius))
+
+
+def test_falloff_matches_reference_including_degenerate_points(rng):
+    origin, insertion = np.array([0.0, 0.0, 0.0]), np.array([3.0, 1.0, 0.5])
+    points = np.vstack([rng.uniform(-2, 6, (500, 3)), origin, insertion, 2 * insertion, -insertion])
+    for cos_zone, r, r_max in [(np.cos(0.7), 3.2, 4.0), (np.cos(1.2), 2.0, 2.0 + 1e-9), (-1.0, 5.0, 6.0)]:
+        got = np.array([K._falloff(*origin, *insertion, *p, cos_zone, r, r_max) for p in points])
+        ref = naive.falloff(origin, insertion, points, cos_zone, r, r_max)
+        assert_close(got, ref)
+    assert K._falloff(*origin, *insertion, *origin, 0.5, 3.0, 4.0) == 0.0
+    assert K._falloff(*origin, *insertion, *insertion, 0.5, np.linalg.norm(insertion), 4.0) == pytest.approx(1.0)
+
+
+def cross2(a, b):
+    return a[0] * b[1] - a[1] * b[0]
+
+
+def workspaces(n):
+    return np.zeros(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n)
+
+
+@pytest.mark.parametrize("uv", [True, False])
+def test_flood_fill_finds_the_brute_force_region(uv, rng):
+    model = model_for(spec("happy", material=material(uv_projection=uv)))
+    x, xp = perturbed(model, rng, scale=0.1)
+    frame = naive.project_uv(xp, model.axis_x, model.axis_z, model.radius) if uv else xp
+    visited, stack, region, delta = workspaces(model.vertex_count)
+    for m in range(model.muscle_count):
+        count = K._region_of_influence(m, frame, model.muscle_origin, model.muscle_insertion_point, model.muscle_insertion,
+                                       model.muscle_cos_zone, model.muscle_r, model.muscle_r_max, model.neighbour_start,
+                                       model.neighbour_index, visited, m + 1, stack, region, delta)
+        ref_delta = naive.falloff(model.muscle_origin[m], model.muscle_insertion_point[m], frame,
+                                  model.muscle_cos_zone[m], model.muscle_r[m], model.muscle_r_max[m])
+        expected = naive.region_of_influence(ref_delta, model.muscle_insertion[m], model.spring_indices, model.vertex_count)
+        assert count > 3, model.muscles.names[m]
+        assert sorted(region[:count]) == sorted(expected), model.muscles.names[m]
+        assert_close(delta[:count], ref_delta[region[:count]])
+
+
+@pytest.mark.parametrize("uv", [True, False])
+def test_muscle_forces_match_reference(uv, rng):
+    model = model_for(spec("happy", material=material(uv_projection=uv)))
+    x, xp = perturbed(model, rng, scale=0.05)
+    activation = rng.uniform(0, 1, model.muscle_count) * (rng.uniform(size=model.muscle_count) > 0.3)
+    frame = naive.project_uv(xp, model.axis_x, model.axis_z, model.radius) if uv else xp.copy()
+    force = np.zeros_like(x)
+    visited, stack, region, delta = workspaces(model.vertex_count)
+    K._muscle_forces(frame, xp, activation, model.muscle_origin, model.muscle_insertion_point, model.muscle_insertion,
+                     model.muscle_cos_zone, model.muscle_r, model.muscle_r_max, model.muscle_force, model.pinned,
+                     model.neighbour_start, model.neighbour_index, model.ring_start, model.ring_a, model.ring_b, uv,
+                     force, visited, 0, stack, region, delta)
+    expected = naive.muscle_forces(model, xp, activation)
+    assert np.abs(expected).max() > 1.0
+    assert_close(force, expected)
+
+
+def test_back_projected_force_lies_in_its_triangle_and_keeps_its_2d_direction(model, rng):
+    x, _ = perturbed(model, rng, scale=0.02)
+    uv = naive.project_uv(x, model.axis_x, model.axis_z, model.radius)
+    f3 = np.empty(3)
+
+    def unfolded(i):
+        """Interior vertex whose projected one-ring keeps its orientation: its 2D wedges
+        tile the circle, so every direction has a triangle (near the nose the
+        projection folds and the boundary rule applies instead)."""
+        ring = range(model.ring_start[i], model.ring_start[i + 1])
+        closed = len(ring) == model.neighbour_start[i + 1] - model.neighbour_start[i]
+        return closed and all(cross2(uv[model.ring_a[k]] - uv[i], uv[model.ring_b[k]] - uv[i]) > 0 for k in ring)
+
+    interior = [i for i in range(model.vertex_count) if not model.pinned[i] and unfolded(i)]
+    assert len(interior) > 300
+    checked = 0
+    for i in rng.choice(interior, 60, replace=False):
+        angle = rng.uniform(0, 2 * np.pi)
+        f2 = 3.0 * np.array([np.cos(angle), np.sin(angle)])
+        assert K._back_project(i, f2[0], f2[1], uv, x, model.neighbour_start, model.neighbour_index,
+                               model.ring_start, model.ring_a, model.ring_b, f3)
+        assert np.linalg.norm(f3) == pytest.approx(3.0)
+        for k in range(model.ring_start[i], model.ring_start[i + 1]):
+            a, b = model.ring_a[k], model.ring_b[k]
+            normal = np.cross(x[a] - x[i], x[b] - x[i])
+            if abs(f3 @ normal) > 1e-9 * np.linalg.norm(normal) * 3.0:
+                continue  # not in this triangle's plane
+            # the force in the triangle's edge basis, mapped to 2D by the same affine map
+            alpha, beta = np.linalg.lstsq(np.column_stack([x[a] - x[i], x[b] - x[i]]), f3, rcond=None)[0]
+            if alpha < -1e-9 or beta < -1e-9:
+                continue
+            image = alpha * (uv[a, :2] - uv[i, :2]) + beta * (uv[b, :2] - uv[i, :2])
+            assert abs(image[0] * f2[1] - image[1] * f2[0]) < 1e-9 * np.linalg.norm(image) * 3.0
+            assert image @ f2 > 0
+            checked += 1
+            break
+        else:
+            pytest.fail(f"force at vertex {i} lies in none of its triangles")
+    assert checked == 60
+
+
+def test_back_projection_of_a_force_leaving_the_mesh_keeps_its_component_along_the_edge(mesh, model):
+    uv = naive.project_uv(model.rest_position, model.axis_x, model.axis_z, model.radius)
+    centre = uv.mean(axis=0)
+    for i in mesh.boundary_loops[0][::6]:
+        f2 = 2.0 * (uv[i] - centre) / np.linalg.norm(uv[i] - centre)  # outward: no triangle holds it
+        f3 = np.empty(3)
+        found = K._back_project(i, f2[0], f2[1], uv, model.rest_position, model.neighbour_start,
+                                model.neighbour_index, model.ring_start, model.ring_a, model.ring_b, f3)
+        expected = naive.back_project(i, f2, uv, model.rest_position, model.faces, model.spring_indices)
+        assert found == bool(np.any(expected))
+        assert_close(f3, expected)
+        assert np.linalg.norm(f3) < 2.0
+
+
+@pytest.mark.parametrize("switches", [{}, {"edge_repulsion": False}, {"uv_projection": False}])
+def test_step_matches_reference(switches, rng):
+    model = model_for(spec("happy", material=material(**switches)))
+    x, _ = perturbed(model, rng, scale=0.05)
+    x[model.pinned] = model.rest_position[model.pinned]
+    v = rng.standard_normal(x.shape)
+    v[model.pinned] = 0
+    activation = rng.uniform(0.2, 1, model.muscle_count)
+    ref_x, ref_v = naive.step(model, x, v, activation, 0.0025)
+    x_k, v_k = x.copy(), v.copy()
+    out = np.empty((1,) + x.shape)
+    diag = np.zeros(1), np.zeros(1, dtype=np.int64), np.zeros(1)
+    m = model.material.model_copy(update={"substeps": 1})
+    arrays = model.kernel_arrays()
+    K._simulate(*arrays, activation[None, :], 0.0025, 1, np.inf, False, x_k, v_k, out, *diag)
+    assert m.substeps == 1
+    assert_close(v_k, ref_v)
+    assert_close(x_k, ref_x)
+
+
+def test_whole_happy_run_matches_reference():
+    s = spec("happy")
+    model = model_for(s)
+    table = activation_table(s, model.muscles)
+    positions, *_ = run(model, table, s.dt)
+    expected = naive.simulate(model, table, s.dt)
+    assert np.abs(positions - expected).max() < 1e-6
+    assert np.abs(positions[-1] - model.rest_position).max() > 0.1

@@ -1,0 +1,161 @@
+"""The simulation's behaviour: rest, symmetry, the eight expressions, settling, the
+thesis's ablations and divergence reporting."""
+
+import numpy as np
+import pytest
+
+import facesim
+from conftest import THESIS_EXPRESSIONS, material, spec
+from facesim.errors import SimulationError
+from facesim.mesh import mirror_map
+from facesim.simulate import model_for, run
+from facesim.spec import activation_table
+
+MOUTH_CORNERS = (61, 291)
+BROWS = (105, 334, 70, 300)
+INNER_BROWS = (107, 336)
+GLABELLA = 9
+UPPER_LIP = (39, 269)  # right, left
+
+
+def lift(rest, final, i):
+    return final[i, 1] - rest[i, 1]
+
+
+def mouth_widening(rest, final):
+    a, b = MOUTH_CORNERS
+    width = np.linalg.norm(rest[a] - rest[b])
+    return (np.linalg.norm(final[a] - final[b]) - width) / width
+
+
+#: What each expression must do to the face, and the muscles without which it must not.
+CHECKS = {
+    "happy": (lambda r, f: min(lift(r, f, i) for i in MOUTH_CORNERS) > 0.1 and mouth_widening(r, f) >= 0.08,
+              ["zygomaticus_major", "levator_anguli_oris"]),
+    "surprise": (lambda r, f: min(lift(r, f, i) for i in BROWS) >= 0.3,
+                 ["frontalis_lateral", "frontalis_outer"]),
+    "sad": (lambda r, f: max(lift(r, f, i) for i in MOUTH_CORNERS) < -0.05, ["depressor_anguli_oris"]),
+    "angry": (lambda r, f: max(lift(r, f, i) for i in MOUTH_CORNERS) < -0.03 and lift(r, f, GLABELLA) < -0.1,
+              ["depressor_anguli_oris", "procerus"]),
+    "fear": (lambda r, f: min(lift(r, f, i) for i in BROWS[:2]) > 0.1
+             and np.linalg.norm(f[107] - f[336]) < np.linalg.norm(r[107] - r[336]) - 0.03,
+             ["frontalis_medial", "frontalis_lateral", "corrugator_supercilii"]),
+    "disgust": (lambda r, f: lift(r, f, UPPER_LIP[0]) - lift(r, f, UPPER_LIP[1]) > 0.1,
+                ["levator_labii_superioris"]),
+    "disgusted_anger": (lambda r, f: lift(r, f, GLABELLA) < -0.1 and min(lift(r, f, i) for i in UPPER_LIP) > 0.05,
+                        ["procerus", "levator_labii_superioris"]),
+    "happy_surprise": (lambda r, f: min(lift(r, f, i) for i in MOUTH_CORNERS) > 0.1 and min(lift(r, f, i) for i in BROWS) >= 0.3,
+                       ["zygomaticus_major", "levator_anguli_oris", "frontalis_lateral", "frontalis_outer"]),
+}
+
+
+@pytest.fixture(scope="module")
+def animations():
+    return {name: facesim.simulate(spec(name)) for name in THESIS_EXPRESSIONS}
+
+
+def test_zero_activation_stays_at_rest():
+    animation = facesim.simulate(spec("happy", activations={}))
+    assert np.abs(animation.positions - animation.rest).max() < 1e-9
+    assert animation.kinetic_energy.max() < 1e-20
+
+
+def test_api_returns_positions_rest_mesh_and_diagnostics(animations):
+    a = animations["happy"]
+    assert a.positions.shape == (35, 468, 3)
+    assert a.rest.shape == (468, 3) and a.faces.shape == (852, 3)
+    assert a.kinetic_energy.shape == a.inverted.shape == a.smallest_area.shape == (35,)
+    assert a.inverted.max() == 0 and 0 < a.smallest_area.min() <= 1
+    assert set(a.active_muscles) == set(spec("happy").activations)
+
+
+@pytest.mark.parametrize("name", [n for n in THESIS_EXPRESSIONS if n != "disgust"])
+def test_symmetric_expressions_give_mirror_symmetric_displacements(name, animations, mesh):
+    mapping = mirror_map(mesh.vertices, mesh.faces)
+    d = animations[name].positions - animations[name].rest
+    mirrored = d[:, mapping] * np.array([-1.0, 1.0, 1.0])
+    assert np.abs(d - mirrored).max() <= 1e-6 * np.abs(d).max()
+
+
+def test_disgust_is_asymmetric(animations, mesh):
+    mapping = mirror_map(mesh.vertices, mesh.faces)
+    d = animations["disgust"].positions[-1] - animations["disgust"].rest
+    assert np.abs(d - d[mapping] * np.array([-1.0, 1.0, 1.0])).max() > 0.1
+
+
+@pytest.mark.parametrize("name", THESIS_EXPRESSIONS)
+def test_expression_moves_what_it_is_about_without_inverting(name, animations):
+    a = animations[name]
+    check, key_muscles = CHECKS[name]
+    assert a.inverted.max() == 0
+    assert check(a.rest, a.positions[-1])
+    # the same check fails once the muscles it relies on are switched off
+    s = spec(name)
+    kept = {m: v for m, v in s.activations.items() if not any(m.startswith(k) for k in key_muscles)}
+    assert len(kept) < len(s.activations)
+    without = facesim.simulate(s.with_overrides(activations=kept))
+    assert not check(without.rest, without.positions[-1])
+
+
+@pytest.mark.parametrize("name", ["happy", "sad", "surprise"])
+def test_settles_when_activations_are_held(name):
+    s = spec(name)
+    model = model_for(s)
+    table = activation_table(s, model.muscles)
+    held = np.vstack([table, np.repeat(table[-1:], 200, axis=0)])
+    _, energy, inverted, _ = run(model, held, s.dt)
+    assert inverted.max() == 0
+    assert energy[-1] < 1e-6 * energy.max()
+
+
+def test_without_edge_repulsion_triangles_collapse_and_with_it_none_do():
+    """Thesis fig. 3.16: without edge repulsion the mesh collapsed by step 12."""
+    strong = dict(onset=0)  # full activation from the first step
+    with_er = facesim.simulate(spec("happy", **strong), stop_on_inversion=False)
+    without = facesim.simulate(spec("happy", material=material(edge_repulsion=False), **strong), stop_on_inversion=False)
+    assert with_er.inverted.max() == 0
+    first = int(np.argmax(without.inverted > 0))
+    assert without.inverted.max() > 0
+    steps = (first + 1) * without.model.material.substeps
+    assert steps <= 60
+
+
+def depth_below_rest_surface(mesh, points):
+    """How far each moved vertex lies below the rest surface (cm, 0 when above), measured
+    against the rest triangles of its own two-ring: a fold through the single-layer face
+    that the missing skull would have stopped."""
+    rest, faces = mesh.vertices, mesh.faces
+    vs, vf = mesh.vertex_faces
+    ns, ni = mesh.neighbours
+    depth = np.zeros(len(points))
+    for i, p in enumerate(points):
+        ring = np.concatenate([[i], ni[ns[i]:ns[i + 1]]])
+        best = np.inf
+        for t in np.unique(np.concatenate([vf[vs[j]:vs[j + 1]] for j in ring])):
+            a, b, c = rest[faces[t]]
+            normal = np.cross(b - a, c - a)
+            normal /= np.linalg.norm(normal)
+            height = (p - a) @ normal
+            q = p - a - height * normal
+            e0, e1 = b - a, c - a
+            v, w = np.linalg.solve([[e0 @ e0, e0 @ e1], [e0 @ e1, e1 @ e1]], [q @ e0, q @ e1])
+            if v >= 0 and w >= 0 and v + w <= 1 and abs(height) < abs(best):
+                best = height
+        depth[i] = max(0.0, -best) if np.isfinite(best) else 0.0
+    return depth
+
+
+def test_without_the_uv_projection_muscles_pull_the_skin_through_the_surface(mesh):
+    with_uv = facesim.simulate(spec("happy"))
+    without = facesim.simulate(spec("happy", material=material(uv_projection=False)))
+    folded = depth_below_rest_surface(mesh, without.positions[-1])
+    kept = depth_below_rest_surface(mesh, with_uv.positions[-1])
+    assert folded.max() > 0.25 and (folded > 0.05).sum() >= 40
+    assert kept.max() < 0.1
+
+
+def test_divergence_raises_with_the_frame():
+    violent = spec("happy", dt=0.5, material=material(substeps=1))
+    with pytest.raises(SimulationError, match=r"at frame \d+") as info:
+        facesim.simulate(violent)
+    assert info.value.frame is not None and info.value.frame < 35
