@@ -420,3 +420,31 @@ def _simulate(
         if energy > energy_limit:
             return RUNAWAY, f, -1
     return OK, -1, -1
+
+
+@njit(**NUMBA_OPTIONS)
+def _vertex_normals(x, faces, out):
+    """Area-weighted vertex normals for smooth shading, written into ``out`` (n, 3)."""
+    out[:] = 0.0
+    for t in range(faces.shape[0]):
+        a = faces[t, 0]
+        b = faces[t, 1]
+        c = faces[t, 2]
+        ux = x[b, 0] - x[a, 0]
+        uy = x[b, 1] - x[a, 1]
+        uz = x[b, 2] - x[a, 2]
+        wx = x[c, 0] - x[a, 0]
+        wy = x[c, 1] - x[a, 1]
+        wz = x[c, 2] - x[a, 2]
+        nx = uy * wz - uz * wy
+        ny = uz * wx - ux * wz
+        nz = ux * wy - uy * wx
+        for v in (a, b, c):
+            out[v, 0] += nx
+            out[v, 1] += ny
+            out[v, 2] += nz
+    for i in range(x.shape[0]):
+        length = math.sqrt(out[i, 0] ** 2 + out[i, 1] ** 2 + out[i, 2] ** 2)
+        if length > 0.0:
+            for d in range(3):
+                out[i, d] /= length

@@ -1,0 +1,50 @@
+# facesim: `make demo` renders an expression, `make test` runs the tests; both set up
+# everything first (Debian packages, a virtual environment, the package).
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+APT_PACKAGES := libosmesa6 libegl1 libegl-mesa0 libgl1-mesa-dri
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: setup system-packages demo test bench mesh docs clean
+
+system-packages:
+	@missing=""; for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+		echo "installing Debian packages:$$missing"; \
+		$(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $$missing; \
+	fi
+
+$(BIN)/facesim: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	$(BIN)/pip install -q -e '.[test]'
+	@touch $@
+
+# MediaPipe (for building meshes from photos) is optional and heavy; the tests use it to
+# rebuild the default face, so `make test` and `make mesh` install it.
+$(VENV)/.photo: $(BIN)/facesim
+	$(BIN)/pip install -q -e '.[test,photo]'
+	@touch $@
+
+setup: system-packages $(BIN)/facesim
+
+demo: setup
+	$(BIN)/facesim render expressions/happy.yaml -o out/happy.mp4 --force
+	@echo "open out/happy.mp4"
+
+test: setup $(VENV)/.photo
+	$(BIN)/python -m pytest -n 2 --durations=10
+
+bench: setup
+	$(BIN)/python scripts/bench.py
+
+mesh: setup $(VENV)/.photo
+	$(BIN)/python scripts/build_face_mesh.py -o meshes/face.obj
+
+docs: setup
+	$(BIN)/facesim sheet expressions -o docs/expressions.png --force
+	$(BIN)/facesim muscles --plot docs/muscles.png > /dev/null
+
+clean:
+	rm -rf $(VENV) out .pytest_cache

@@ -1,0 +1,86 @@
+"""Rendering many specs at once: each in its own process (spawn), one renderer per
+process reused for every spec of the same mesh. A failing spec is reported and the
+others still finish."""
+
+from __future__ import annotations
+
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import FacesimError, InputError
+from .render import FaceRenderer, RenderSettings
+
+
+def collect_specs(inputs: list[Path]) -> list[Path]:
+    """Spec files from files and directories (their *.yaml, sorted), in order given."""
+    specs: list[Path] = []
+    for item in inputs:
+        if item.is_dir():
+            found = sorted(item.glob("*.yaml")) + sorted(item.glob("*.yml"))
+            if not found:
+                raise InputError(f"{item}: no *.yaml specs in this directory")
+            specs.extend(found)
+        elif item.is_file():
+            specs.append(item)
+        else:
+            raise InputError(f"{item}: no such spec file or directory")
+    return specs
+
+
+@dataclass
+class BatchResult:
+    spec: Path
+    report: object | None = None
+    error: str | None = None
+
+
+_renderers: dict = {}
+
+
+def _renderer_for(animation, settings, backend) -> FaceRenderer:
+    key = (animation.rest.tobytes(), animation.faces.tobytes(), settings)
+    if key not in _renderers:
+        _renderers[key] = FaceRenderer(animation.rest, animation.faces, settings, backend)
+    return _renderers[key]
+
+
+def render_one(spec_path: Path, output: Path, settings: RenderSettings, backend: str, force: bool,
+               mesh: Path | None = None, muscles: Path | None = None) -> BatchResult:
+    """Load, simulate, render and write one spec; errors become a result, not an exception."""
+    from .output import check_output, output_kind, write_animation
+    from .simulate import simulate
+    from .spec import load_spec
+
+    try:
+        spec = load_spec(spec_path).with_overrides(mesh=mesh, muscles=muscles)
+        check_output(output, force, settings)
+        animation = simulate(spec)
+        renderer = None if output_kind(output) == "npz" else _renderer_for(animation, settings, backend)
+        return BatchResult(spec_path, report=write_animation(animation, output, settings, backend=backend, renderer=renderer))
+    except FacesimError as exc:
+        return BatchResult(spec_path, error=str(exc))
+
+
+def run_batch(specs: list[Path], outdir: Path, suffix: str, settings: RenderSettings, backend: str, jobs: int,
+              force: bool, mesh: Path | None = None, muscles: Path | None = None, on_done=None) -> list[BatchResult]:
+    outputs = [outdir / (s.stem + suffix) for s in specs]
+    if len(set(outputs)) != len(outputs):
+        raise InputError("two specs share a file name; their outputs would collide in " + str(outdir))
+    args = [(s, o, settings, backend, force, mesh, muscles) for s, o in zip(specs, outputs)]
+    results: dict[Path, BatchResult] = {}
+    if jobs <= 1:
+        for a in args:
+            results[a[0]] = render_one(*a)
+            if on_done:
+                on_done(results[a[0]])
+    else:
+        with ProcessPoolExecutor(min(jobs, len(args)), mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(render_one, *a) for a in args]
+            for future in as_completed(futures):
+                result = future.result()
+                results[result.spec] = result
+                if on_done:
+                    on_done(result)
+    return [results[s] for s in specs]

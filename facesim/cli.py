@@ -1,0 +1,294 @@
+"""The facesim command line. Each command parses its arguments and calls plain functions
+of the package; errors the user can act on are one line on stderr with exit code 2
+(bad input) or 1 (a run that failed), never a traceback.
+"""
+
+from __future__ import annotations
+
+import functools
+import subprocess
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from .errors import FacesimError, InputError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
+                  help="Anatomy-based facial expression animation: simulate a muscle-driven face and render it offscreen.")
+mesh_app = typer.Typer(no_args_is_help=True, help="Face meshes: build one from a photo.")
+app.add_typer(mesh_app, name="mesh")
+
+
+def fail(message: str, code: int) -> None:
+    typer.echo(f"facesim: error: {message}", err=True)
+    raise typer.Exit(code)
+
+
+def handled(command):
+    """Turn facesim's errors and Ctrl-C into one line and an exit code."""
+
+    @functools.wraps(command)
+    def wrapper(*args, **kwargs):
+        try:
+            return command(*args, **kwargs)
+        except FacesimError as exc:
+            fail(str(exc), exc.exit_code)
+        except KeyboardInterrupt:
+            fail("interrupted; nothing was written", 130)
+
+    return wrapper
+
+
+def settings_from(size: str, camera: str, wireframe: bool = False, show_muscles: bool = False):
+    from .render import RenderSettings, parse_size
+
+    width, height = parse_size(size)
+    return RenderSettings(width, height, camera, wireframe, show_muscles)
+
+
+def positive(value: Optional[int], name: str) -> None:
+    if value is not None and value < 1:
+        raise InputError(f"{name}: must be at least 1, got {value}")
+
+
+#: The order of the thesis's figure 3.12 (and 3.13), used by the sheet.
+THESIS_ORDER = ("angry", "disgust", "fear", "happy", "sad", "surprise", "disgusted_anger", "happy_surprise")
+
+SIZE = typer.Option("512x512", "--size", help="frame size WxH")
+CAMERA = typer.Option("front", "--camera", help="front, three-quarter or profile")
+BACKEND = typer.Option("auto", "--backend", help="OpenGL platform: auto (EGL, then OSMesa), egl or osmesa")
+FORCE = typer.Option(False, "--force", help="overwrite an existing output")
+MESH = typer.Option(None, "--mesh", help="face mesh to use instead of the spec's")
+MUSCLES = typer.Option(None, "--muscles", help="muscle file to use instead of the spec's")
+
+
+@app.command()
+@handled
+def render(
+    spec: Path = typer.Argument(..., help="expression spec (YAML)"),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="out.mp4, out.gif, out.npz or a directory of PNGs (default out/<name>.mp4)"),
+    size: str = SIZE,
+    fps: Optional[float] = typer.Option(None, "--fps", help="playback rate (default: the spec's, 25)"),
+    camera: str = CAMERA,
+    backend: str = BACKEND,
+    wireframe: bool = typer.Option(False, "--wireframe", help="draw the mesh as wireframe"),
+    show_muscles: bool = typer.Option(False, "--show-muscles", help="draw muscle forces as red arrows"),
+    force: bool = FORCE,
+    jobs: int = typer.Option(1, "--jobs", help="render frames in this many processes"),
+    mesh: Optional[Path] = MESH,
+    muscles: Optional[Path] = MUSCLES,
+):
+    """Simulate one expression spec and render it."""
+    from .output import check_output, progress_bar, write_animation
+    from .simulate import simulate
+    from .spec import load_spec
+
+    positive(jobs, "--jobs")
+    if fps is not None and not 0 < fps <= 240:
+        raise InputError(f"--fps: must be between 0 and 240, got {fps}")
+    settings = settings_from(size, camera, wireframe, show_muscles)
+    loaded = load_spec(spec).with_overrides(mesh=mesh, muscles=muscles)
+    output = output or Path("out") / f"{loaded.title}.mp4"
+    check_output(output, force, settings)
+    animation = simulate(loaded)
+    with progress_bar(animation.frames, f"rendering {loaded.title}") as advance:
+        report = write_animation(animation, output, settings, fps, backend, jobs, advance)
+    typer.echo(f"wrote {output}: {report.frames} frames, simulation {report.simulation_seconds * 1000:.1f} ms, "
+               f"render {report.render_seconds:.2f} s", err=True)
+
+
+@app.command()
+@handled
+def batch(
+    inputs: list[Path] = typer.Argument(..., help="spec files or directories of specs"),
+    outdir: Path = typer.Option(..., "-o", "--output", help="directory for the outputs"),
+    jobs: int = typer.Option(2, "--jobs", help="specs rendered at once, each in its own process"),
+    fmt: str = typer.Option("mp4", "--format", help="mp4, gif, npz or png (a directory per spec)"),
+    size: str = SIZE,
+    camera: str = CAMERA,
+    backend: str = BACKEND,
+    force: bool = FORCE,
+    mesh: Optional[Path] = MESH,
+    muscles: Optional[Path] = MUSCLES,
+):
+    """Render many specs in parallel; a failing spec does not stop the others."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from .batch import collect_specs, run_batch
+    from .output import progress_bar
+
+    positive(jobs, "--jobs")
+    suffix = {"mp4": ".mp4", "gif": ".gif", "npz": ".npz", "png": ""}.get(fmt)
+    if suffix is None:
+        raise InputError(f"--format: expected mp4, gif, npz or png, got {fmt!r}")
+    settings = settings_from(size, camera)
+    specs = collect_specs(inputs)
+    try:
+        outdir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{outdir}: cannot create the output directory ({exc.strerror})") from None
+    with progress_bar(len(specs), "batch") as advance:
+        results = run_batch(specs, outdir, suffix, settings, backend, jobs, force, mesh, muscles,
+                            on_done=(lambda _: advance()) if advance else None)
+    table = Table(title=f"facesim batch: {len(specs)} specs")
+    for column in ("spec", "muscles", "frames", "simulation (ms)", "render (s)", "fps", "output"):
+        table.add_column(column, justify="left" if column in ("spec", "output") else "right")
+    for r in results:
+        if r.report:
+            p = r.report
+            table.add_row(r.spec.stem, str(p.muscles), str(p.frames), f"{p.simulation_seconds * 1000:.1f}",
+                          f"{p.render_seconds:.2f}", f"{p.fps:.1f}", str(p.output))
+        else:
+            table.add_row(r.spec.stem, "", "", "", "", "", "FAILED")
+    Console(stderr=False, width=140).print(table)
+    failed = [r for r in results if r.error]
+    for r in failed:
+        typer.echo(f"facesim: error: {r.error}", err=True)
+    if failed:
+        raise typer.Exit(1)
+
+
+@app.command()
+@handled
+def validate(specs: list[Path] = typer.Argument(..., help="spec files")):
+    """Check specs (schema, muscles, mesh) without simulating."""
+    from .simulate import model_for
+    from .spec import activation_table, load_spec
+
+    bad = 0
+    for path in specs:
+        try:
+            spec = load_spec(path)
+            model = model_for(spec)
+            activation_table(spec, model.muscles)
+            typer.echo(f"ok: {path} ({len(spec.activations)} muscles, {spec.frames} frames, dt {spec.dt})")
+        except FacesimError as exc:
+            typer.echo(f"facesim: error: {exc}", err=True)
+            bad += 1
+    if bad:
+        raise typer.Exit(2)
+
+
+@app.command()
+@handled
+def info(mesh: Optional[Path] = MESH, muscles: Optional[Path] = MUSCLES):
+    """The face mesh, its muscles, and which OpenGL backends work here."""
+    from .config import DEFAULT_MESH, DEFAULT_MUSCLES
+    from .mesh import load_mesh
+    from .muscles import load_muscles
+    from .render import BACKENDS
+
+    mesh_path = mesh or DEFAULT_MESH
+    face = load_mesh(mesh_path)
+    muscle_set = load_muscles(muscles or DEFAULT_MUSCLES, face)
+    cx, cz, radius = face.vertical_axis
+    typer.echo(f"mesh: {mesh_path}: {face.vertex_count} vertices, {len(face.faces)} triangles, "
+               f"boundary loops {[len(l) for l in face.boundary_loops]}, size {face.scale:.1f} cm")
+    typer.echo(f"projection (eq. 3.21): vertical axis at x={cx:.2f}, z={cz:.2f} cm, radius {radius:.2f} cm")
+    typer.echo(f"muscles: {muscles or DEFAULT_MUSCLES}: {muscle_set.count} muscles, {len(muscle_set.pinned)} pinned vertices")
+    for backend in BACKENDS:
+        result = subprocess.run([sys.executable, "-c", f"from facesim.render import probe; print(probe({backend!r}))"],
+                                capture_output=True, text=True, timeout=120)
+        status = result.stdout.strip().splitlines()[-1] if result.stdout.strip() else f"fails: {result.stderr.strip()[-200:]}"
+        typer.echo(f"backend {backend}: {status}")
+
+
+@app.command("muscles")
+@handled
+def muscles_command(
+    plot: Optional[Path] = typer.Option(None, "--plot", help="draw the muscle map to this PNG"),
+    mesh: Optional[Path] = MESH,
+    muscles: Optional[Path] = MUSCLES,
+):
+    """List the muscles of a face (and draw them)."""
+    import numpy as np
+    from rich.console import Console
+    from rich.table import Table
+
+    from .config import DEFAULT_MESH, DEFAULT_MUSCLES
+    from .model import Material, build_model
+    from .mesh import load_mesh
+    from .muscles import load_muscles
+    from .plots import muscle_regions, plot_muscles
+
+    face = load_mesh(mesh or DEFAULT_MESH)
+    model = build_model(face, load_muscles(muscles or DEFAULT_MUSCLES, face), Material())
+    regions = muscle_regions(model)
+    table = Table(title=f"{model.muscle_count} muscles")
+    for column in ("name", "kind", "attachment", "insertion", "zone (deg)", "falloff", "force", "region"):
+        table.add_column(column)
+    m = model.muscles
+    for k, name in enumerate(m.names):
+        table.add_row(name, "linear", str(m.attachment[k]), str(m.insertion[k]), f"{np.degrees(m.zone[k]):.0f}",
+                      f"{m.falloff[k, 0]:g}-{m.falloff[k, 1]:g}", f"{m.force[k]:g}", f"{len(regions[k])} vertices")
+    Console(width=140).print(table)
+    if plot:
+        plot_muscles(model, plot)
+        typer.echo(f"wrote {plot}", err=True)
+
+
+@app.command()
+@handled
+def sheet(
+    directory: Path = typer.Argument(..., help="directory of expression specs"),
+    output: Path = typer.Option(..., "-o", "--output", help="PNG to write"),
+    size: str = typer.Option("384x384", "--size", help="size of each face"),
+    backend: str = BACKEND,
+    force: bool = FORCE,
+    columns: int = typer.Option(3, "--columns"),
+):
+    """The last frame of every expression in a labelled grid, the neutral face first."""
+    from .batch import collect_specs
+    from .plots import contact_sheet
+    from .render import FaceRenderer
+    from .simulate import simulate
+    from .spec import load_spec
+
+    positive(columns, "--columns")
+    if output.suffix.lower() != ".png":
+        raise InputError(f"{output}: the sheet is a .png")
+    if output.exists() and not force:
+        raise InputError(f"{output}: already exists (use --force to overwrite)")
+    order = {name: k for k, name in enumerate(THESIS_ORDER)}
+    specs = sorted((load_spec(p) for p in collect_specs([directory])), key=lambda s: (order.get(s.title, len(order)), s.title))
+    animations = [simulate(s) for s in specs]
+    first = animations[0]
+    settings = settings_from(size, "front")
+    images, labels = [], ["neutral"]
+    with FaceRenderer(first.rest, first.faces, settings, backend) as renderer:
+        images.append(renderer.render(first.rest))
+        for a in animations:
+            same_mesh = a.rest.shape == first.rest.shape and (a.rest == first.rest).all()
+            if same_mesh:
+                images.append(renderer.render(a.positions[-1]))
+            else:
+                with FaceRenderer(a.rest, a.faces, settings, backend) as own:
+                    images.append(own.render(a.positions[-1]))
+            labels.append(a.name.replace("_", " "))
+    output.parent.mkdir(parents=True, exist_ok=True)
+    contact_sheet(images, labels, output, columns)
+    typer.echo(f"wrote {output}: {len(images)} faces", err=True)
+
+
+@mesh_app.command("from-photo")
+@handled
+def mesh_from_photo_command(
+    photo: Path = typer.Argument(..., help="a portrait photo (JPEG, PNG)"),
+    output: Path = typer.Option(..., "-o", "--output", help="OBJ to write"),
+    symmetrise: bool = typer.Option(True, "--symmetrise/--no-symmetrise", help="average with the mirror image"),
+    force: bool = FORCE,
+):
+    """Build a face mesh (MediaPipe topology, cm) from one photo. Needs facesim[photo]."""
+    from .photo import mesh_from_photo
+
+    if output.exists() and not force:
+        raise InputError(f"{output}: already exists (use --force to overwrite)")
+    built = mesh_from_photo(photo, output, symmetric=symmetrise)
+    typer.echo(f"wrote {output}: {built.vertex_count} vertices, {len(built.faces)} triangles", err=True)
+
+
+def main():  # pragma: no cover - the console script
+    app()

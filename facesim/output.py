@@ -1,0 +1,208 @@
+"""From an animation to files: render its frames (in one process or several) and write
+them as MP4, GIF, a PNG sequence, or raw NPZ positions.
+
+The output kind follows the path: ``.mp4``, ``.gif``, ``.npz``, anything else a directory
+of ``frame_0000.png`` ... Every output is written under a temporary name and renamed into
+place when complete (``writers.atomic_path``).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import nullcontext
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError, RenderError
+from .render import FaceRenderer, RenderSettings
+from .simulate import Animation, muscle_forces
+from .writers import atomic_path
+
+KINDS = {".mp4": "mp4", ".gif": "gif", ".npz": "npz"}
+#: Arrow length per unit of muscle force in --show-muscles (cm per force unit).
+ARROW_SCALE = 0.004
+
+
+def output_kind(path: Path) -> str:
+    return KINDS.get(path.suffix.lower(), "png" if path.suffix == "" else "unknown")
+
+
+def check_output(path: Path, force: bool, settings: RenderSettings | None = None) -> str:
+    """Validate an output path before any work: kind, existence, writable parent."""
+    kind = output_kind(path)
+    if kind == "unknown":
+        raise InputError(f"{path}: unknown output type {path.suffix!r} (use .mp4, .gif, .npz or a directory)")
+    if path.exists() and not force:
+        raise InputError(f"{path}: already exists (use --force to overwrite)")
+    parent = path.parent
+    if not parent.exists():
+        try:
+            parent.mkdir(parents=True)
+        except OSError as exc:
+            raise InputError(f"{path}: cannot create the output directory ({exc.strerror})") from None
+    if not parent.is_dir() or not _writable(parent):
+        raise InputError(f"{path}: output directory is not writable")
+    if kind == "mp4" and settings is not None and (settings.width % 2 or settings.height % 2):
+        raise InputError(f"--size: MP4 needs an even width and height, got {settings.width}x{settings.height}")
+    return kind
+
+
+def _writable(directory: Path) -> bool:
+    import os
+
+    return os.access(directory, os.W_OK | os.X_OK)
+
+
+def arrows_for(animation: Animation) -> np.ndarray | None:
+    """Muscle-force arrows (frames, n, 3) for --show-muscles."""
+    model = animation.model
+    return np.stack([
+        ARROW_SCALE * muscle_forces(model, p, a) for p, a in zip(animation.positions, animation.activations)
+    ])
+
+
+# One renderer per worker process, built by the pool's initializer and reused for every
+# chunk of frames the process is given.
+_worker_renderer: FaceRenderer | None = None
+
+
+def _init_worker(rest, faces, settings, backend):
+    global _worker_renderer
+    _worker_renderer = FaceRenderer(rest, faces, settings, backend)
+
+
+def _render_chunk(positions, arrows):
+    return np.stack([_worker_renderer.render(p, None if arrows is None else a)
+                     for p, a in zip(positions, arrows if arrows is not None else [None] * len(positions))])
+
+
+def render_frames(animation: Animation, settings: RenderSettings, backend: str = "auto", jobs: int = 1,
+                  progress=None, renderer: FaceRenderer | None = None) -> np.ndarray:
+    """All frames of an animation as (frames, height, width, 3) uint8.
+
+    With ``jobs`` > 1 the frames are split into contiguous chunks rendered by that many
+    processes (started with spawn: an OpenGL context must not be forked), each with its
+    own renderer. ``renderer`` lets a caller reuse one across animations of one mesh.
+    """
+    arrows = arrows_for(animation) if settings.show_muscles else None
+    frames = animation.frames
+    if jobs <= 1 or frames < 2 * jobs:
+        own = renderer is None
+        renderer = renderer or FaceRenderer(animation.rest, animation.faces, settings, backend)
+        try:
+            out = []
+            for k, p in enumerate(animation.positions):
+                out.append(renderer.render(p, None if arrows is None else arrows[k]))
+                if progress:
+                    progress(1)
+            return np.stack(out)
+        finally:
+            if own:
+                renderer.close()
+    bounds = np.linspace(0, frames, jobs * 2 + 1).astype(int)
+    chunks = [(animation.positions[a:b], None if arrows is None else arrows[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(jobs, mp_context=context, initializer=_init_worker,
+                             initargs=(animation.rest, animation.faces, settings, backend)) as pool:
+        out = []
+        for (positions, _), images in zip(chunks, pool.map(_render_chunk, *zip(*chunks))):
+            out.append(images)
+            if progress:
+                progress(len(positions))
+    return np.concatenate(out)
+
+
+def write_frames(frames: np.ndarray, path: Path, kind: str, fps: float) -> None:
+    """Write rendered frames atomically as MP4, GIF or a PNG directory."""
+    import imageio.v3 as iio
+
+    if kind == "png":
+        with atomic_path(path, directory=True) as tmp:
+            for k, frame in enumerate(frames):
+                iio.imwrite(tmp / f"frame_{k:04d}.png", frame)
+        return
+    with atomic_path(path) as tmp:
+        if kind == "mp4":
+            import imageio_ffmpeg
+
+            height, width = frames.shape[1:3]
+            writer = imageio_ffmpeg.write_frames(
+                str(tmp), (width, height), fps=fps, codec="libx264", pix_fmt_out="yuv420p",
+                output_params=["-crf", "18", "-preset", "veryfast"], macro_block_size=1, ffmpeg_log_level="error",
+            )
+            writer.send(None)
+            for frame in frames:
+                writer.send(np.ascontiguousarray(frame))
+            writer.close()
+        elif kind == "gif":
+            iio.imwrite(tmp, frames, extension=".gif", duration=1000.0 / fps, loop=0)
+
+
+def write_npz(animation: Animation, path: Path) -> None:
+    with atomic_path(path) as tmp:
+        np.savez_compressed(
+            tmp, positions=animation.positions, faces=animation.faces, rest=animation.rest,
+            activations=animation.activations, muscles=np.array(animation.muscle_names), dt=animation.dt,
+            kinetic_energy=animation.kinetic_energy,
+        )
+
+
+@dataclass
+class RenderReport:
+    """What one render did, for the batch table."""
+
+    name: str
+    output: Path
+    muscles: int
+    frames: int
+    simulation_seconds: float
+    render_seconds: float
+
+    @property
+    def fps(self) -> float:
+        return self.frames / max(self.simulation_seconds + self.render_seconds, 1e-9)
+
+
+def write_animation(animation: Animation, path: Path, settings: RenderSettings, fps: float | None = None,
+                    backend: str = "auto", jobs: int = 1, progress=None,
+                    renderer: FaceRenderer | None = None) -> RenderReport:
+    """Render (unless NPZ) and write one animation; the output path was checked before."""
+    kind = output_kind(path)
+    start = time.perf_counter()
+    if kind == "npz":
+        write_npz(animation, path)
+    else:
+        frames = render_frames(animation, settings, backend, jobs, progress, renderer)
+        write_frames(frames, path, kind, fps or animation.fps)
+    return RenderReport(animation.name, path, len(animation.active_muscles), animation.frames, animation.seconds,
+                        time.perf_counter() - start)
+
+
+def progress_bar(total: int, description: str, enabled: bool | None = None):
+    """A rich progress bar on a terminal; a no-op context otherwise."""
+    if enabled is None:
+        enabled = sys.stderr.isatty()
+    if not enabled:
+        return nullcontext(None)
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    class _Bar:
+        def __enter__(self):
+            self.progress = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                                     TimeRemainingColumn(), transient=True)
+            self.progress.__enter__()
+            self.task = self.progress.add_task(description, total=total)
+            return lambda n=1: self.progress.advance(self.task, n)
+
+        def __exit__(self, *exc):
+            self.progress.__exit__(*exc)
+
+    return _Bar()
+
+
+__all__ = ["RenderError", "RenderReport", "check_output", "render_frames", "write_animation", "progress_bar"]

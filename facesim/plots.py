@@ -1,0 +1,87 @@
+"""Static pictures: the muscle map (the thesis's figures 3.2 and 3.8) and the expression
+sheet (figure 3.12), drawn with matplotlib."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .writers import atomic_path
+
+
+def muscle_regions(model) -> list[np.ndarray]:
+    """Each muscle's region of influence at rest (the flood fill of section 3.3)."""
+    from . import kernels
+
+    n = model.vertex_count
+    frame = np.empty_like(model.rest_position)
+    if model.material.uv_projection:
+        kernels._project_uv(model.rest_position, model.axis_x, model.axis_z, model.radius, frame)
+    else:
+        frame[:] = model.rest_position
+    visited, stack, region, delta = np.zeros(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n)
+    regions = []
+    for m in range(model.muscle_count):
+        count = kernels._region_of_influence(m, frame, model.muscle_origin, model.muscle_insertion_point,
+                                             model.muscle_insertion, model.muscle_cos_zone, model.muscle_r,
+                                             model.muscle_r_max, model.neighbour_start, model.neighbour_index,
+                                             visited, m + 1, stack, region, delta)
+        regions.append(region[:count].copy())
+    return regions
+
+
+def plot_muscles(model, path: Path) -> None:
+    """The mesh from the front, every muscle an arrow from insertion to attachment, its
+    region of influence shaded."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x = model.rest_position
+    names = model.muscles.names
+    fig, ax = plt.subplots(figsize=(9, 10))
+    ax.triplot(x[:, 0], x[:, 1], model.faces, color="0.75", lw=0.4)
+    cmap = plt.get_cmap("tab20")
+    families = sorted({n.removesuffix("_l").removesuffix("_r") for n in names})
+    for m, region in enumerate(muscle_regions(model)):
+        family = names[m].removesuffix("_l").removesuffix("_r")
+        colour = cmap(families.index(family) % 20)
+        ax.scatter(x[region, 0], x[region, 1], s=28, color=colour, alpha=0.35, lw=0)
+        o, i = model.muscles.attachment[m], model.muscles.insertion[m]
+        ax.annotate("", xy=x[o, :2], xytext=x[i, :2],
+                    arrowprops=dict(arrowstyle="-|>", color=colour, lw=1.8, shrinkA=0, shrinkB=0))
+        if not names[m].endswith("_l"):
+            ax.text(x[o, 0], x[o, 1], " " + family.replace("_", " "), fontsize=6.5, color="0.15",
+                    ha="right" if x[o, 0] < 0 else "left", va="center")
+    pinned = model.pinned
+    ax.scatter(x[pinned, 0], x[pinned, 1], s=8, color="k", marker="s", label="pinned")
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    ax.set_title(f"{model.muscle_count} muscles: arrows from insertion to attachment, regions of influence shaded")
+    ax.legend(loc="lower right", fontsize=8)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
+def contact_sheet(images: list[np.ndarray], labels: list[str], path: Path, columns: int = 3) -> None:
+    """Images in a labelled grid."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = -(-len(images) // columns)
+    h, w = images[0].shape[:2]
+    fig, axes = plt.subplots(rows, columns, figsize=(columns * w / 120, rows * (h / 120 + 0.35)))
+    for ax in np.atleast_1d(axes).ravel():
+        ax.set_axis_off()
+    for ax, image, label in zip(np.atleast_1d(axes).ravel(), images, labels):
+        ax.imshow(image)
+        ax.set_title(label, fontsize=12)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120)
+    plt.close(fig)

@@ -1,0 +1,236 @@
+"""Offscreen rendering of face animations with pyrender (the maintained ``pyrender2``),
+on a machine with no display and no GPU: OSMesa or Mesa's software EGL.
+
+One :class:`FaceRenderer` per process is built once and reused for every frame: the
+scene (skin, eyeballs with iris and pupil behind the eye openings, a dark mouth cavity
+behind the lips, a key and a fill light, a plain background) never changes; per frame
+only the face's vertex buffer is rewritten in place (positions and Numba-computed
+normals), never the scene.
+
+``PYOPENGL_PLATFORM`` must be set before anything imports OpenGL, so nothing here imports
+pyrender until :func:`use_backend` has chosen the platform.
+"""
+
+from __future__ import annotations
+
+import ctypes.util
+import os
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError, RenderError
+from .kernels import _vertex_normals
+
+#: Tried in this order by ``--backend auto``. Mesa's software EGL (surfaceless) first: it
+#: renders the same frames about twice as fast as OSMesa here (BENCHMARKS.md), and newer
+#: Mesa releases drop OSMesa; OSMesa remains the fallback.
+BACKENDS = ("egl", "osmesa")
+_LIBRARIES = {"osmesa": "OSMesa", "egl": "EGL"}
+CAMERAS = {"front": 0.0, "three-quarter": 35.0, "profile": 90.0}
+
+SKIN = (0.86, 0.66, 0.55, 1.0)
+BACKGROUND = (0.93, 0.93, 0.95, 1.0)
+MOUTH = (0.22, 0.05, 0.06, 1.0)
+SCLERA = (0.95, 0.94, 0.92, 1.0)
+IRIS = (0.28, 0.42, 0.52, 1.0)
+PUPIL = (0.03, 0.03, 0.03, 1.0)
+ARROW = (0.85, 0.05, 0.05, 1.0)
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    width: int = 512
+    height: int = 512
+    camera: str = "front"
+    wireframe: bool = False
+    show_muscles: bool = False
+
+    def __post_init__(self):
+        if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192):
+            raise InputError(f"--size: expected WxH between 16 and 8192, got {self.width}x{self.height}")
+        if self.camera not in CAMERAS:
+            raise InputError(f"--camera: expected one of {', '.join(CAMERAS)}, got {self.camera!r}")
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise InputError(f"--size: expected WxH such as 512x512, got {text!r}") from None
+    return w, h
+
+
+def backend_available(name: str) -> bool:
+    """Whether the backend's shared library is installed (not that it works)."""
+    return ctypes.util.find_library(_LIBRARIES[name]) is not None
+
+
+def use_backend(requested: str = "auto") -> str:
+    """Choose the GL platform and set it for PyOpenGL; returns the one chosen.
+
+    Must run before OpenGL is imported; in a process that already imported it, the
+    platform it imported with is kept.
+    """
+    if requested not in ("auto",) + BACKENDS:
+        raise InputError(f"--backend: expected auto, osmesa or egl, got {requested!r}")
+    if "OpenGL" in sys.modules:
+        current = os.environ.get("PYOPENGL_PLATFORM", "")
+        if requested not in ("auto", current):
+            raise RenderError(f"OpenGL is already loaded with the {current!r} platform in this process")
+        return current
+    candidates = BACKENDS if requested == "auto" else (requested,)
+    for name in candidates:
+        if backend_available(name):
+            os.environ["PYOPENGL_PLATFORM"] = name
+            if name == "egl":
+                os.environ.setdefault("EGL_PLATFORM", "surfaceless")
+            return name
+    raise RenderError(
+        f"no working GL backend ({'/'.join(candidates)}): install Debian's libosmesa6 "
+        "(sudo apt-get install libosmesa6) or Mesa's EGL (libegl1 libegl-mesa0)"
+    )
+
+
+def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
+    forward = eye - target
+    forward /= np.linalg.norm(forward)
+    right = np.cross([0.0, 1.0, 0.0], forward)
+    right /= np.linalg.norm(right)
+    up = np.cross(forward, right)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = right, up, forward, eye
+    return pose
+
+
+def _openings(rest: np.ndarray, faces: np.ndarray) -> tuple[list[np.ndarray], np.ndarray | None]:
+    """The eye openings (right, left) and the mouth opening among the mesh's inner
+    boundary loops: the mouth is the lowest loop on the midline, the eyes the highest
+    pair on either side. Missing ones are left out."""
+    from .mesh import FaceMesh
+
+    loops = FaceMesh(rest, faces).boundary_loops[1:]
+    centres = [rest[loop].mean(axis=0) for loop in loops]
+    width = np.ptp(rest[:, 0])
+    mouth = min((i for i, c in enumerate(centres) if abs(c[0]) < 0.05 * width), key=lambda i: centres[i][1], default=None)
+    sides = [min((i for i, c in enumerate(centres) if s * c[0] > 0.1 * width and i != mouth),
+                 key=lambda i: -centres[i][1], default=None) for s in (-1, 1)]
+    eyes = [loops[i] for i in sides if i is not None]
+    return eyes, (loops[mouth] if mouth is not None else None)
+
+
+class FaceRenderer:
+    """A pyrender scene of one face, rendered offscreen frame after frame."""
+
+    def __init__(self, rest: np.ndarray, faces: np.ndarray, settings: RenderSettings = RenderSettings(), backend: str = "auto"):
+        self.backend = use_backend(backend)
+        import pyrender
+        import trimesh
+
+        self.settings = settings
+        self._pyrender = pyrender
+        self._faces = np.ascontiguousarray(faces, dtype=np.int64)
+        self._normals = np.empty_like(rest)
+        _vertex_normals(rest, self._faces, self._normals)
+        scene = pyrender.Scene(bg_color=BACKGROUND, ambient_light=(0.28, 0.26, 0.26))
+        skin = pyrender.MetallicRoughnessMaterial(baseColorFactor=SKIN, metallicFactor=0.0, roughnessFactor=0.75, doubleSided=True)
+        self._face = pyrender.Primitive(positions=rest, normals=self._normals, indices=self._faces, material=skin)
+        scene.add(pyrender.Mesh([self._face]))
+        self._add_eyes_and_mouth(scene, rest, faces, pyrender, trimesh)
+        self._arrows = None
+        if settings.show_muscles:
+            lines = np.repeat(rest, 2, axis=0)
+            self._arrows = pyrender.Primitive(
+                positions=lines, mode=pyrender.constants.GLTF.LINES,
+                material=pyrender.MetallicRoughnessMaterial(baseColorFactor=ARROW, emissiveFactor=ARROW[:3]),
+            )
+            scene.add(pyrender.Mesh([self._arrows]))
+
+        centre = (rest.min(axis=0) + rest.max(axis=0)) / 2
+        extent = np.ptp(rest, axis=0)
+        fov = np.radians(25.0)
+        distance = 0.62 * max(extent[1], extent[0] * settings.height / settings.width) / np.tan(fov / 2) + extent[2] / 2
+        yaw = np.radians(CAMERAS[settings.camera])
+        eye = centre + distance * np.array([-np.sin(yaw), 0.0, np.cos(yaw)])
+        camera = pyrender.PerspectiveCamera(yfov=fov, aspectRatio=settings.width / settings.height, znear=1.0, zfar=10 * distance)
+        scene.add(camera, pose=_look_at(eye, centre))
+        scene.add(pyrender.DirectionalLight(color=(1.0, 0.97, 0.92), intensity=3.2),
+                  pose=_look_at(centre + np.array([-0.6, 0.7, 1.0]), centre))
+        scene.add(pyrender.DirectionalLight(color=(0.85, 0.9, 1.0), intensity=1.3),
+                  pose=_look_at(centre + np.array([0.9, -0.1, 0.6]), centre))
+        self._scene = scene
+        try:
+            self._renderer = pyrender.OffscreenRenderer(settings.width, settings.height)
+        except Exception as exc:
+            raise RenderError(
+                f"cannot open an offscreen GL context with {self.backend} ({type(exc).__name__}: {exc}); "
+                "install Debian's libosmesa6 or try --backend egl"
+            ) from None
+        self._flags = pyrender.RenderFlags.ALL_WIREFRAME if settings.wireframe else pyrender.RenderFlags.NONE
+        self._renderer.render(self._scene, flags=self._flags)  # uploads the buffers once
+
+    def _add_eyes_and_mouth(self, scene, rest, faces, pyrender, trimesh) -> None:
+        eyes, mouth = _openings(rest, faces)
+        for loop in eyes:
+            points = rest[loop]
+            radius = 0.42 * np.ptp(points[:, 0])
+            centre = points.mean(axis=0) - np.array([0.0, 0.0, 0.8 * radius])
+            ball = trimesh.creation.icosphere(subdivisions=3, radius=radius)
+            angle = np.arccos(np.clip(ball.vertices[:, 2] / radius, -1, 1))
+            colours = np.where((angle < 0.2)[:, None], PUPIL, np.where((angle < 0.46)[:, None], IRIS, SCLERA))
+            ball.visual.vertex_colors = (np.asarray(colours) * 255).astype(np.uint8)
+            ball.apply_translation(centre)
+            scene.add(pyrender.Mesh.from_trimesh(ball, smooth=True))
+        if mouth is not None:
+            points = rest[mouth]
+            cavity = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+            cavity.apply_scale([0.55 * np.ptp(points[:, 0]), 1.2, 1.0])
+            cavity.apply_translation(points.mean(axis=0) - np.array([0.0, 0.0, 1.1]))
+            material = pyrender.MetallicRoughnessMaterial(baseColorFactor=MOUTH, metallicFactor=0.0, roughnessFactor=1.0)
+            scene.add(pyrender.Mesh.from_trimesh(cavity, material=material, smooth=True))
+
+    def _upload(self, primitive, data: np.ndarray) -> None:
+        from OpenGL import GL
+
+        GL.glBindBuffer(GL.GL_ARRAY_BUFFER, primitive._buffers[0])
+        GL.glBufferSubData(GL.GL_ARRAY_BUFFER, 0, data.nbytes, data)
+
+    def render(self, positions: np.ndarray, arrows: np.ndarray | None = None) -> np.ndarray:
+        """One frame: positions (n, 3) of the face, optional arrows (n, 3) drawn from
+        each vertex (muscle forces). Returns (height, width, 3) uint8."""
+        positions = np.ascontiguousarray(positions, dtype=np.float64)
+        _vertex_normals(positions, self._faces, self._normals)
+        self._renderer._platform.make_current()
+        self._upload(self._face, np.hstack([positions, self._normals]).astype(np.float32))
+        if self._arrows is not None:
+            vectors = np.zeros_like(positions) if arrows is None else arrows
+            lines = np.stack([positions, positions + vectors], axis=1).reshape(-1, 3).astype(np.float32)
+            self._upload(self._arrows, lines)
+        colour, _ = self._renderer.render(self._scene, flags=self._flags)
+        return colour
+
+    def close(self) -> None:
+        if getattr(self, "_renderer", None) is not None:
+            self._renderer.delete()
+            self._renderer = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def probe(backend: str) -> str:
+    """Open a tiny offscreen context with one backend and draw a triangle: 'ok' or why not.
+    Run it in a fresh process (``facesim info`` does): a process keeps its first GL platform."""
+    if not backend_available(backend):
+        return f"missing ({_LIBRARIES[backend]} library not installed)"
+    try:
+        rest = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+        with FaceRenderer(rest, np.array([[0, 1, 2]]), RenderSettings(32, 32), backend) as renderer:
+            image = renderer.render(rest)
+        return "ok" if image.std() > 0 else "renders blank frames"
+    except Exception as exc:  # the probe reports every failure rather than raising
+        return f"fails: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
