@@ -53,9 +53,14 @@ def check_output(path: Path, force: bool, settings: RenderSettings | None = None
 
 
 def _writable(directory: Path) -> bool:
-    import os
+    """Try it: permission bits do not tell for root or read-only file systems."""
+    import tempfile
 
-    return os.access(directory, os.W_OK | os.X_OK)
+    try:
+        with tempfile.TemporaryFile(dir=directory):
+            return True
+    except OSError:
+        return False
 
 
 def arrows_for(animation: Animation) -> np.ndarray | None:

@@ -2,7 +2,6 @@
 the batch of the eight thesis expressions. Commands run in fresh processes, as users run
 them (a process keeps the first OpenGL platform it loads)."""
 
-import os
 import signal
 import subprocess
 import sys
@@ -198,15 +197,7 @@ def test_bad_options_and_unwritable_output(tmp_path):
     blocked = tmp_path / "file"
     blocked.write_text("")
     one_line_error(facesim("render", spec, "-o", blocked / "a.mp4"), 2, "a.mp4")
-    locked = tmp_path / "locked"
-    locked.mkdir()
-    locked.chmod(0o500)
-    try:
-        if os.access(locked, os.W_OK):
-            pytest.skip("running as a user who can write anywhere")
-        one_line_error(facesim("render", spec, "-o", locked / "a.mp4"), 2, "not writable")
-    finally:
-        locked.chmod(0o700)
+    one_line_error(facesim("render", spec, "-o", "/proc/a.mp4"), 2, "/proc/a.mp4: output directory is not writable")
 
 
 def test_no_gl_backend_names_the_package_to_install(tmp_path):
