@@ -205,6 +205,16 @@ def load_mesh(path: str | Path) -> FaceMesh:
     return FaceMesh(vertices, faces)
 
 
+def subdivide(mesh: FaceMesh, levels: int = 1) -> FaceMesh:
+    """Loop subdivision (each level: four triangles per triangle, smoothed positions)."""
+    import trimesh
+
+    vertices, faces = mesh.vertices, mesh.faces
+    for _ in range(levels):
+        vertices, faces = trimesh.remesh.subdivide_loop(vertices, faces, iterations=1)
+    return FaceMesh(vertices, faces)
+
+
 def write_obj(path: str | Path, mesh: FaceMesh, header: str = "") -> None:
     """Write an OBJ with 6 decimals (1e-6 cm), atomically."""
     from .writers import atomic_path

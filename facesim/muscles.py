@@ -179,3 +179,14 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
 def load_muscles(path: str | Path, mesh: FaceMesh) -> MuscleSet:
     path = Path(path)
     return resolve_muscles(load_model(path, MuscleFile), mesh, source=str(path))
+
+
+def muscles_as_points(spec: MuscleFile, mesh: FaceMesh) -> MuscleFile:
+    """The same muscle file with every landmark index replaced by that vertex's position
+    on ``mesh``: muscles carried by position to a mesh of another topology (a subdivided
+    face, a scan), where they snap to the nearest vertex."""
+    def point(p: Point) -> Point:
+        return tuple(float(c) for c in mesh.vertices[p]) if isinstance(p, int) else p
+
+    muscles = [m.model_copy(update={"attachment": point(m.attachment), "insertion": point(m.insertion)}) for m in spec.muscles]
+    return spec.model_copy(update={"muscles": muscles, "pinned": spec.pinned.model_copy(update={"vertices": []})})

@@ -1,0 +1,381 @@
+"""facesim benchmarks: the thesis's timing tables side by side with facesim's, and the
+performance targets. Prints every table and writes BENCHMARKS.md and docs/scaling.png.
+
+    python scripts/bench.py            # the full run (`make bench`, a few minutes)
+    python scripts/bench.py --quick    # tiny sizes and few repeats (the smoke test)
+
+Times are medians over repeated warm runs unless a table says otherwise; Numba's
+compilation is kept out of them and measured on its own. Ratios are measured side by
+side in the same run: this machine is shared and noisy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tests"))
+
+import facesim  # noqa: E402
+from facesim.config import DEFAULT_MUSCLES  # noqa: E402
+from facesim.mesh import load_mesh, subdivide  # noqa: E402
+from facesim.model import build_model  # noqa: E402
+from facesim.muscles import MuscleFile, muscles_as_points, resolve_muscles  # noqa: E402
+from facesim.schema import load_model  # noqa: E402
+from facesim.simulate import model_for, run  # noqa: E402
+from facesim.spec import activation_table  # noqa: E402
+
+EXPRESSIONS = ROOT / "expressions"
+#: Thesis Table 3.1: activated muscles, elapsed seconds for 35 frames, frames per second.
+THESIS_31 = {
+    "happy": (6, 8.078, 4.33), "sad": (10, 9.753, 3.59), "angry": (7, 6.823, 5.13), "fear": (12, 9.987, 3.50),
+    "disgust": (5, 3.873, 9.03), "surprise": (10, 5.615, 6.23), "disgusted_anger": (9, 8.298, 4.22),
+    "happy_surprise": (12, 11.691, 2.99),
+}
+#: Thesis Table 3.2: min, max, average, average deviation, standard deviation (s).
+THESIS_32 = {
+    "happy": (7.772, 8.134, 7.982, 0.118, 0.134), "sad": (9.705, 9.915, 9.799, 0.063, 0.073),
+    "angry": (6.689, 6.851, 6.789, 0.043, 0.053), "fear": (9.847, 10.252, 10.100, 0.100, 0.127),
+    "disgust": (3.791, 3.956, 3.884, 0.038, 0.050), "surprise": (5.615, 5.734, 5.692, 0.026, 0.034),
+}
+#: Thesis Table 3.3: (frames, dt) -> elapsed seconds for happy.
+THESIS_33 = {(140, 0.0025): 31.399, (35, 0.01): 8.078, (17, 0.015): 3.754}
+
+
+def timed(fn, repeats: int) -> list[float]:
+    out = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        out.append(time.perf_counter() - start)
+    return out
+
+
+def median(values) -> float:
+    return statistics.median(values)
+
+
+def table(headers: list[str], rows: list[list]) -> str:
+    lines = ["| " + " | ".join(headers) + " |", "|" + "|".join("---" for _ in headers) + "|"]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def python_json(code: str, env: dict | None = None) -> dict:
+    """Run code in a fresh interpreter that prints one JSON object last."""
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={**os.environ, **(env or {})},
+                            cwd=ROOT, timeout=1200)
+    if result.returncode != 0:
+        raise RuntimeError(result.stderr[-2000:])
+    return json.loads(result.stdout.strip().splitlines()[-1])
+
+
+def machine() -> str:
+    cpu = "unknown CPU"
+    if Path("/proc/cpuinfo").exists():
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    import numba
+    import scipy
+
+    versions = {"python": platform.python_version(), "numpy": np.__version__, "numba": numba.__version__, "scipy": scipy.__version__}
+    for name in ("pyrender2", "PyOpenGL", "imageio-ffmpeg"):
+        try:
+            from importlib.metadata import version
+
+            versions[name] = version(name)
+        except Exception:
+            pass
+    return f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; " + ", ".join(f"{k} {v}" for k, v in versions.items())
+
+
+# --- the thesis's tables -------------------------------------------------------------
+
+def simulate_seconds(name: str, repeats: int, **changes) -> list[float]:
+    spec = facesim.load_spec(EXPRESSIONS / f"{name}.yaml")
+    spec = spec.with_overrides(**changes) if changes else spec
+    model = model_for(spec)
+    table_ = activation_table(spec, model.muscles)
+    run(model, table_, spec.dt)  # warm: compiled and cached
+    return timed(lambda: run(model, table_, spec.dt), repeats)
+
+
+RENDER_CODE = """
+import json, os, sys, time, statistics
+import numpy as np, facesim
+from facesim.render import FaceRenderer, RenderSettings
+from facesim.output import write_frames
+names, size, repeats, backend = {names!r}, {size}, {repeats}, {backend!r}
+out = {{}}
+renderer = None
+for name in names:
+    a = facesim.simulate(facesim.load_spec(f"expressions/{{name}}.yaml"))
+    renderer = renderer or FaceRenderer(a.rest, a.faces, RenderSettings(size, size), backend)
+    renderer.render(a.positions[0])
+    render, encode = [], []
+    for _ in range(repeats):
+        t = time.perf_counter(); frames = np.stack([renderer.render(p) for p in a.positions]); render.append(time.perf_counter() - t)
+        t = time.perf_counter(); write_frames(frames, __import__("pathlib").Path("/tmp/facesim-bench.mp4"), "mp4", 25); encode.append(time.perf_counter() - t)
+    out[name] = dict(render=statistics.median(render), encode=statistics.median(encode))
+print(json.dumps(out))
+"""
+
+
+def table_31(repeats: int, size: int, render_repeats: int) -> tuple[str, dict]:
+    names = list(THESIS_31)
+    render = python_json(RENDER_CODE.format(names=names, size=size, repeats=render_repeats, backend="auto"))
+    rows, figures = [], {}
+    for name in names:
+        muscles, thesis_s, thesis_fps = THESIS_31[name]
+        spec = facesim.load_spec(EXPRESSIONS / f"{name}.yaml")
+        sim = median(simulate_seconds(name, repeats))
+        r = render[name]
+        end_to_end = sim + r["render"] + r["encode"]
+        fps = spec.frames / end_to_end
+        figures[name] = dict(sim=sim, render=r["render"], encode=r["encode"], fps=fps)
+        rows.append([name.replace("_", " "), f"{len(spec.activations)} ({muscles})", f"{sim * 1e3:.2f}",
+                     f"{r['render'] * 1e3:.0f}", f"{r['encode'] * 1e3:.0f}", f"{fps:.1f}", f"{thesis_s:.3f}",
+                     f"{thesis_fps:.2f}", f"{thesis_s / sim:,.0f}x", f"{fps / thesis_fps:.1f}x"])
+    text = table(["expression", "muscles (thesis)", "simulation, 35 frames (ms)", f"render {size}² (ms)",
+                  "MP4 encode (ms)", "end-to-end fps", "thesis elapsed (s)", "thesis fps", "simulation speed-up",
+                  "fps ratio"], rows)
+    return text, figures
+
+
+def table_32(runs: int) -> str:
+    rows = []
+    for name, thesis in THESIS_32.items():
+        t = np.array(simulate_seconds(name, runs)) * 1e3
+        rows.append([name, f"{t.min():.2f}", f"{t.max():.2f}", f"{t.mean():.2f}", f"{np.abs(t - t.mean()).mean():.3f}",
+                     f"{t.std(ddof=1):.3f}", " / ".join(f"{v:.3f}" for v in thesis)])
+    return table(["expression", "min (ms)", "max (ms)", "average (ms)", "average deviation (ms)",
+                  "standard deviation (ms)", "thesis min / max / avg / avg dev / std (s)"], rows)
+
+
+def table_33(repeats: int) -> str:
+    rows = []
+    for (frames, dt), thesis in THESIS_33.items():
+        t = median(simulate_seconds("happy", repeats, frames=frames, dt=dt))
+        rows.append([frames, dt, f"{t * 1e3:.2f}", f"{thesis:.3f}", f"{thesis / t:,.0f}x"])
+    return table(["frames", "Δt (s)", "simulation (ms)", "thesis (s)", "speed-up"], rows)
+
+
+# --- side by side: Numba against NumPy, compilation ----------------------------------
+
+def numba_vs_numpy(repeats: int) -> tuple[str, float]:
+    import naive
+
+    spec = facesim.load_spec(EXPRESSIONS / "happy.yaml")
+    model = model_for(spec)
+    table_ = activation_table(spec, model.muscles)
+    steps = len(table_) * model.material.substeps
+    numba_step = median(timed(lambda: run(model, table_, spec.dt), repeats)) / steps
+    x, v = model.rest_position.copy(), np.zeros_like(model.rest_position)
+    h = spec.dt / model.material.substeps
+    numpy_step = median(timed(lambda: naive.step(model, x, v, table_[-1], h), max(3, repeats // 3)))
+    ratio = numpy_step / numba_step
+    text = table(["one step of happy (468 vertices)", "time per step (µs)"],
+                 [["NumPy reference (tests/naive.py)", f"{numpy_step * 1e6:,.0f}"],
+                  ["Numba kernels", f"{numba_step * 1e6:,.1f}"], ["ratio", f"{ratio:,.0f}x"]])
+    return text, ratio
+
+
+COMPILE_CODE = """
+import json, time
+t0 = time.perf_counter()
+import facesim
+t1 = time.perf_counter()
+spec = facesim.load_spec("expressions/happy.yaml")
+from facesim.simulate import model_for, run
+from facesim.spec import activation_table
+m = model_for(spec); tab = activation_table(spec, m.muscles)
+t2 = time.perf_counter(); run(m, tab, spec.dt); t3 = time.perf_counter(); run(m, tab, spec.dt); t4 = time.perf_counter()
+print(json.dumps(dict(imports=t1 - t0, first=t3 - t2, warm=t4 - t3)))
+"""
+
+
+def compilation() -> tuple[str, dict]:
+    with tempfile.TemporaryDirectory() as cache:
+        cold = python_json(COMPILE_CODE, {"NUMBA_CACHE_DIR": cache})
+        cached = python_json(COMPILE_CODE, {"NUMBA_CACHE_DIR": cache})
+    rows = [["first call, compiling (empty cache)", f"{cold['first'] * 1e3:,.0f}"],
+            ["first call in a fresh process, Numba's cache", f"{cached['first'] * 1e3:,.0f}"],
+            ["warm call", f"{cached['warm'] * 1e3:,.1f}"],
+            ["(importing facesim, for reference)", f"{cached['imports'] * 1e3:,.0f}"]]
+    return table(["happy, 35 frames", "ms"], rows), dict(cold=cold, cached=cached)
+
+
+def fresh_render_wall(repeats: int) -> tuple[float, list[float]]:
+    """`facesim render expressions/happy.yaml` as a fresh process, caches warm."""
+    out = Path(tempfile.mkdtemp()) / "happy.mp4"
+    command = [str(Path(sys.executable).parent / "facesim"), "render", "expressions/happy.yaml", "-o", str(out), "--force"]
+    subprocess.run(command, cwd=ROOT, capture_output=True, check=True)
+    walls = timed(lambda: subprocess.run(command, cwd=ROOT, capture_output=True, check=True), repeats)
+    return median(walls), walls
+
+
+# --- scaling ---------------------------------------------------------------------------
+
+def scaling(levels: int, repeats: int, plot: Path | None) -> tuple[str, dict]:
+    base = load_mesh(ROOT / "meshes" / "face.obj")
+    muscle_file = load_model(DEFAULT_MUSCLES, MuscleFile)
+    carried = muscles_as_points(muscle_file, base)
+    spec = facesim.load_spec(EXPRESSIONS / "happy.yaml")
+    rows, figures = [], {}
+    for level in range(levels + 1):
+        mesh = subdivide(base, level) if level else base
+        model = build_model(mesh, resolve_muscles(carried, mesh, f"level {level}"), spec.material)
+        table_ = activation_table(spec, model.muscles)
+        run(model, table_[:2], spec.dt, stop_on_inversion=False)
+        seconds = median(timed(lambda: run(model, table_, spec.dt, stop_on_inversion=False), repeats if level < 3 else 1))
+        steps = len(table_) * model.material.substeps
+        per = seconds / (steps * model.vertex_count)
+        figures[model.vertex_count] = per
+        rows.append([level, f"{model.vertex_count:,}", f"{len(mesh.faces):,}", f"{seconds * 1e3:,.1f}", f"{per * 1e9:.0f}",
+                     f"{1 / per / 1e6:.2f}"])
+    if plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        n = np.array(list(figures))
+        fig, ax = plt.subplots(figsize=(6, 4))
+        ax.plot(n, np.array(list(figures.values())) * 1e9, "o-")
+        ax.set_xscale("log")
+        ax.set_xlabel("vertices (default face, Loop-subdivided 0-4 times)")
+        ax.set_ylabel("ns per vertex-step")
+        ax.set_ylim(bottom=0)
+        ax.set_title("facesim: simulation cost per vertex-step (1 core)")
+        ax.grid(alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(plot, dpi=110)
+        plt.close(fig)
+    return table(["subdivisions", "vertices", "triangles", "happy, 35 frames (ms)", "ns per vertex-step",
+                  "million vertex-steps per second"], rows), figures
+
+
+# --- rendering -------------------------------------------------------------------------
+
+RENDER_FLOOR_CODE = """
+import json, time, statistics
+import numpy as np, facesim
+from facesim.render import FaceRenderer, RenderSettings
+size, repeats, frames = {size}, {repeats}, 35
+a = facesim.simulate(facesim.load_spec("expressions/happy.yaml"))
+r = FaceRenderer(a.rest, a.faces, RenderSettings(size, size), {backend!r})
+for p in a.positions[:3]: r.render(p)
+ours, floor = [], []
+for _ in range(repeats):
+    t = time.perf_counter()
+    for p in a.positions: r.render(p)
+    ours.append((time.perf_counter() - t) / frames)
+    # the floor: the same scene, the same renderer and settings, nothing updated
+    t = time.perf_counter()
+    for _ in range(frames): r._renderer.render(r._scene, flags=r._flags)
+    floor.append((time.perf_counter() - t) / frames)
+print(json.dumps(dict(ours=statistics.median(ours), floor=statistics.median(floor), backend=r.backend)))
+"""
+
+PROCESSES_CODE = """
+import json, time, numpy as np, facesim
+from facesim.output import render_frames
+from facesim.render import RenderSettings
+spec = facesim.load_spec("expressions/happy.yaml").with_overrides(frames={frames})
+a = facesim.simulate(spec)
+out = {{}}
+for jobs in (1, 2):
+    t = time.perf_counter(); render_frames(a, RenderSettings(512, 512), jobs=jobs); out[jobs] = time.perf_counter() - t
+print(json.dumps(out))
+"""
+
+
+def rendering(sizes: list[int], repeats: int, frames: int) -> tuple[str, dict]:
+    rows, figures = [], {}
+    for backend in ("egl", "osmesa"):
+        for size in sizes:
+            r = python_json(RENDER_FLOOR_CODE.format(size=size, repeats=repeats, backend=backend))
+            figures[(backend, size)] = r
+            rows.append([backend, f"{size}²", f"{r['ours'] * 1e3:.1f}", f"{r['floor'] * 1e3:.1f}", f"{r['ours'] / r['floor']:.2f}"])
+    text = table(["backend", "size", "facesim per frame (ms)", "bare pyrender floor (ms)", "ratio"], rows)
+    processes = python_json(PROCESSES_CODE.format(frames=frames))
+    text += "\n\n" + table([f"{frames} frames at 512², processes", "wall (s)", "frames per second"],
+                           [[jobs, f"{t:.2f}", f"{frames / t:.1f}"] for jobs, t in processes.items()])
+    figures["processes"] = processes
+    return text, figures
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="tiny sizes, few repeats: a smoke test")
+    parser.add_argument("-o", "--output", type=Path, default=ROOT / "BENCHMARKS.md")
+    args = parser.parse_args()
+    quick = args.quick
+    repeats = 2 if quick else 7
+    started = time.perf_counter()
+    sections = []
+
+    def section(title: str, body: str) -> None:
+        print(f"\n## {title}\n\n{body}", flush=True)
+        sections.append(f"## {title}\n\n{body}")
+
+    section("Machine", machine())
+    t31, f31 = table_31(repeats, 128 if quick else 512, 1 if quick else 3)
+    section("Table 3.1: the eight expressions, 35 frames, Δt = 0.01", t31 + "\n\nSimulation: median of "
+            f"{repeats} warm runs. Render: 35 frames offscreen (auto backend), one renderer reused, median of "
+            f"{1 if quick else 3}. End-to-end fps: 35 frames over simulation + render + MP4 encode, one process. "
+            "The thesis's elapsed time (Matlab) covers its simulation and on-screen plotting.")
+    section("Table 3.2: 10 consecutive runs of the six basic expressions (simulation only)", table_32(3 if quick else 10))
+    section("Table 3.3: happy at other frame counts and time steps", table_33(repeats))
+    text, ratio = numba_vs_numpy(repeats)
+    section("Numba against the NumPy reference, side by side", text)
+    text, compile_figures = compilation()
+    section("Compilation, measured apart", text + "\n\nEach row is one fresh process; `cache=True` keeps compiled "
+            "kernels on disk, so only the very first run on a machine pays for compilation.")
+    wall, walls = fresh_render_wall(1 if quick else 5)
+    section("`facesim render expressions/happy.yaml` in a fresh process, caches warm",
+            f"median wall {wall:.2f} s over {len(walls)} runs: " + ", ".join(f"{w:.2f}" for w in walls))
+    text, scale = scaling(1 if quick else 4, repeats, None if quick else ROOT / "docs" / "scaling.png")
+    section("Scaling: the default face Loop-subdivided (muscles carried by position)", text +
+            ("" if quick else "\n\n![cost per vertex-step](docs/scaling.png)"))
+    text, render_figures = rendering([64] if quick else [256, 512, 1024], 1 if quick else 3, 12 if quick else 70)
+    section("Rendering: facesim against the bare pyrender floor", text + "\n\nThe floor renders the same scene "
+            "with the same renderer and settings and updates nothing; facesim's frame adds the vertex normals "
+            "(Numba) and the in-place vertex-buffer upload.")
+
+    happy = f31["happy"]
+    per_core_28k = 1 / next((v for k, v in scale.items() if 20_000 < k < 40_000), float("nan")) / 1e6
+    egl512 = render_figures.get(("egl", 512), render_figures.get(("egl", 64)))
+    targets = [
+        ["happy, 35 frames, simulation only, warm", "≤ 2 ms", f"{happy['sim'] * 1e3:.2f} ms"],
+        ["vertex-steps per second per core, ~28k vertices", "≥ 10 million", f"{per_core_28k:.2f} million"],
+        ["Numba step against the NumPy reference", "≥ 50x", f"{ratio:,.0f}x"],
+        ["happy end to end at 512² to MP4, warm", "≥ 25 fps", f"{happy['fps']:.1f} fps (one process)"],
+        ["facesim per-frame render against the bare floor", "≤ 1.2x", f"{egl512['ours'] / egl512['floor']:.2f}x (EGL, 512²)"],
+        ["`facesim render expressions/happy.yaml`, fresh process, warm cache", "< 3 s", f"{wall:.2f} s"],
+    ]
+    section("Targets", table(["target", "goal", "measured"], targets))
+    header = ("# facesim benchmarks\n\nProduced by `make bench` (`python scripts/bench.py`) on "
+              f"{time.strftime('%Y-%m-%d')} in {time.perf_counter() - started:.0f} s. Thesis figures are from T. "
+              "Erkoç, *Anatomy Based Animation of Facial Expressions*, Tables 3.1-3.3 (Matlab).\n")
+    if not quick:
+        args.output.write_text(header + "\n" + "\n\n".join(sections) + "\n")
+        print(f"\nwrote {args.output}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
