@@ -41,11 +41,11 @@ def handled(command):
     return wrapper
 
 
-def settings_from(size: str, camera: str, wireframe: bool = False, show_muscles: bool = False):
+def settings_from(size: str, camera: str, wireframe: bool = False, show_muscles: bool = False, antialias: bool = True):
     from .render import RenderSettings, parse_size
 
     width, height = parse_size(size)
-    return RenderSettings(width, height, camera, wireframe, show_muscles)
+    return RenderSettings(width, height, camera, wireframe, show_muscles, antialias)
 
 
 def positive(value: Optional[int], name: str) -> None:
@@ -59,6 +59,7 @@ THESIS_ORDER = ("angry", "disgust", "fear", "happy", "sad", "surprise", "disgust
 SIZE = typer.Option("512x512", "--size", help="frame size WxH")
 CAMERA = typer.Option("front", "--camera", help="front, three-quarter or profile")
 BACKEND = typer.Option("auto", "--backend", help="OpenGL platform: auto (EGL, then OSMesa), egl or osmesa")
+ANTIALIAS = typer.Option(True, "--antialias/--no-antialias", help="4x multisampling (off: about a third faster)")
 FORCE = typer.Option(False, "--force", help="overwrite an existing output")
 MESH = typer.Option(None, "--mesh", help="face mesh to use instead of the spec's")
 MUSCLES = typer.Option(None, "--muscles", help="muscle file to use instead of the spec's")
@@ -75,6 +76,7 @@ def render(
     backend: str = BACKEND,
     wireframe: bool = typer.Option(False, "--wireframe", help="draw the mesh as wireframe"),
     show_muscles: bool = typer.Option(False, "--show-muscles", help="draw muscle forces as red arrows"),
+    antialias: bool = ANTIALIAS,
     force: bool = FORCE,
     jobs: int = typer.Option(1, "--jobs", help="render frames in this many processes"),
     mesh: Optional[Path] = MESH,
@@ -88,7 +90,7 @@ def render(
     positive(jobs, "--jobs")
     if fps is not None and not 0 < fps <= 240:
         raise InputError(f"--fps: must be between 0 and 240, got {fps}")
-    settings = settings_from(size, camera, wireframe, show_muscles)
+    settings = settings_from(size, camera, wireframe, show_muscles, antialias)
     loaded = load_spec(spec).with_overrides(mesh=mesh, muscles=muscles)
     output = output or Path("out") / f"{loaded.title}.mp4"
     check_output(output, force, settings)
@@ -109,6 +111,7 @@ def batch(
     size: str = SIZE,
     camera: str = CAMERA,
     backend: str = BACKEND,
+    antialias: bool = ANTIALIAS,
     force: bool = FORCE,
     mesh: Optional[Path] = MESH,
     muscles: Optional[Path] = MUSCLES,
@@ -124,7 +127,7 @@ def batch(
     suffix = {"mp4": ".mp4", "gif": ".gif", "npz": ".npz", "png": ""}.get(fmt)
     if suffix is None:
         raise InputError(f"--format: expected mp4, gif, npz or png, got {fmt!r}")
-    settings = settings_from(size, camera)
+    settings = settings_from(size, camera, antialias=antialias)
     specs = collect_specs(inputs)
     try:
         outdir.mkdir(parents=True, exist_ok=True)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 #: Options for every ``@njit`` kernel. ``cache=True`` keeps compiled code on disk so that
 #: a second process does not compile again.
-NUMBA_OPTIONS = dict(cache=True, nogil=True, fastmath=False)
+NUMBA_OPTIONS = dict(cache=True, nogil=True, fastmath=True)
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 PROJECT_DIR = PACKAGE_DIR.parent

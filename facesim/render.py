@@ -46,6 +46,7 @@ class RenderSettings:
     camera: str = "front"
     wireframe: bool = False
     show_muscles: bool = False
+    antialias: bool = True
 
     def __post_init__(self):
         if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192):
@@ -91,6 +92,26 @@ def use_backend(requested: str = "auto") -> str:
         f"no working GL backend ({'/'.join(candidates)}): install Debian's libosmesa6 "
         "(sudo apt-get install libosmesa6) or Mesa's EGL (libegl1 libegl-mesa0)"
     )
+
+
+def _single_sample(renderer) -> None:
+    """Make a pyrender Renderer draw without its fixed 4x multisampling: with software
+    rasterisation that saves about a third of each frame (BENCHMARKS.md), at the price
+    of jagged edges. pyrender hard-codes the sample count, so the call that allocates the
+    framebuffer is wrapped for this renderer only."""
+    import pyrender.renderer as module
+
+    configure = renderer._configure_main_framebuffer
+
+    def single_sample_framebuffer():
+        allocate = module.glRenderbufferStorageMultisample
+        module.glRenderbufferStorageMultisample = lambda target, _samples, fmt, w, h: allocate(target, 0, fmt, w, h)
+        try:
+            configure()
+        finally:
+            module.glRenderbufferStorageMultisample = allocate
+
+    renderer._configure_main_framebuffer = single_sample_framebuffer
 
 
 def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -167,6 +188,8 @@ class FaceRenderer:
                 f"cannot open an offscreen GL context with {self.backend} ({type(exc).__name__}: {exc}); "
                 "install Debian's libosmesa6 or try --backend egl"
             ) from None
+        if not settings.antialias:
+            _single_sample(self._renderer._renderer)
         self._flags = pyrender.RenderFlags.ALL_WIREFRAME if settings.wireframe else pyrender.RenderFlags.NONE
         self._renderer.render(self._scene, flags=self._flags)  # uploads the buffers once
 

@@ -110,7 +110,10 @@ def test_wireframe_show_muscles_and_parallel_frames(tmp_path):
     facesim("render", spec, "-o", tmp_path / "wire", "--wireframe", *SMALL, check=0)
     facesim("render", spec, "-o", tmp_path / "arrows", "--show-muscles", *SMALL, check=0)
     facesim("render", spec, "-o", tmp_path / "jobs", "--jobs", "2", *SMALL, check=0)
-    last = {name: iio.imread(tmp_path / name / "frame_0011.png").astype(int) for name in ("plain", "wire", "arrows", "jobs")}
+    facesim("render", spec, "-o", tmp_path / "aliased", "--no-antialias", *SMALL, check=0)
+    last = {name: iio.imread(tmp_path / name / "frame_0011.png").astype(int)
+            for name in ("plain", "wire", "arrows", "jobs", "aliased")}
+    assert 0 < np.abs(last["aliased"] - last["plain"]).mean() < 2
     assert np.abs(last["wire"] - last["plain"]).mean() > 2
     red = (last["arrows"][..., 0] > 150) & (last["arrows"][..., 1] < 80)
     assert red.sum() > 5 and ((last["plain"][..., 0] > 150) & (last["plain"][..., 1] < 80)).sum() == 0
