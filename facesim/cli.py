@@ -97,8 +97,9 @@ def render(
     animation = simulate(loaded)
     with progress_bar(animation.frames, f"rendering {loaded.title}") as advance:
         report = write_animation(animation, output, settings, fps, backend, jobs, advance)
+    compiled = " (the first run compiles the Numba kernels; later runs load them from cache)" if report.simulation_seconds > 3 else ""
     typer.echo(f"wrote {output}: {report.frames} frames, simulation {report.simulation_seconds * 1000:.1f} ms, "
-               f"render {report.render_seconds:.2f} s", err=True)
+               f"render {report.render_seconds:.2f} s{compiled}", err=True)
 
 
 @app.command()

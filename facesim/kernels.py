@@ -321,6 +321,21 @@ def _velocity_update(x, v, force, stiff, pull, mass, damping, dt, pinned, v_out)
 
 
 @njit(**NUMBA_OPTIONS)
+def _triangle_normal(x, faces, t):
+    """(b - a) x (c - a) of triangle t: its normal, twice its area long."""
+    a = faces[t, 0]
+    b = faces[t, 1]
+    c = faces[t, 2]
+    ux = x[b, 0] - x[a, 0]
+    uy = x[b, 1] - x[a, 1]
+    uz = x[b, 2] - x[a, 2]
+    wx = x[c, 0] - x[a, 0]
+    wy = x[c, 1] - x[a, 1]
+    wz = x[c, 2] - x[a, 2]
+    return uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+
+
+@njit(**NUMBA_OPTIONS)
 def _triangle_checks(x, faces, rest_normal, rest_area):
     """Inverted triangles (normal against the rest normal), the first of them, and the
     smallest area relative to rest."""
@@ -328,18 +343,7 @@ def _triangle_checks(x, faces, rest_normal, rest_area):
     first = -1
     smallest = np.inf
     for t in range(faces.shape[0]):
-        a = faces[t, 0]
-        b = faces[t, 1]
-        c = faces[t, 2]
-        ux = x[b, 0] - x[a, 0]
-        uy = x[b, 1] - x[a, 1]
-        uz = x[b, 2] - x[a, 2]
-        wx = x[c, 0] - x[a, 0]
-        wy = x[c, 1] - x[a, 1]
-        wz = x[c, 2] - x[a, 2]
-        nx = uy * wz - uz * wy
-        ny = uz * wx - ux * wz
-        nz = ux * wy - uy * wx
+        nx, ny, nz = _triangle_normal(x, faces, t)
         if nx * rest_normal[t, 0] + ny * rest_normal[t, 1] + nz * rest_normal[t, 2] <= 0.0:
             inverted += 1
             if first < 0:
@@ -427,19 +431,9 @@ def _vertex_normals(x, faces, out):
     """Area-weighted vertex normals for smooth shading, written into ``out`` (n, 3)."""
     out[:] = 0.0
     for t in range(faces.shape[0]):
-        a = faces[t, 0]
-        b = faces[t, 1]
-        c = faces[t, 2]
-        ux = x[b, 0] - x[a, 0]
-        uy = x[b, 1] - x[a, 1]
-        uz = x[b, 2] - x[a, 2]
-        wx = x[c, 0] - x[a, 0]
-        wy = x[c, 1] - x[a, 1]
-        wz = x[c, 2] - x[a, 2]
-        nx = uy * wz - uz * wy
-        ny = uz * wx - ux * wz
-        nz = ux * wy - uy * wx
-        for v in (a, b, c):
+        nx, ny, nz = _triangle_normal(x, faces, t)
+        for k in range(3):
+            v = faces[t, k]
             out[v, 0] += nx
             out[v, 1] += ny
             out[v, 2] += nz
