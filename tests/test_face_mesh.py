@@ -111,3 +111,19 @@ def test_a_second_photo_gives_a_valid_mesh_that_carries_the_default_muscles(tmp_
     assert np.abs(loaded.vertices - mesh.vertices).max() < 1e-5
     muscles = load_muscles(DEFAULT_MUSCLES, loaded)
     assert muscles.count == 27
+
+
+@needs_mediapipe
+def test_cli_from_photo_on_a_blank_image_is_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    import imageio.v3 as iio
+
+    blank = tmp_path / "blank.png"
+    iio.imwrite(blank, np.zeros((128, 128, 3), dtype=np.uint8))
+    result = subprocess.run([sys.executable, "-m", "facesim", "mesh", "from-photo", str(blank), "-o", str(tmp_path / "m.obj")],
+                            capture_output=True, text=True)
+    assert result.returncode == 2
+    assert result.stderr.strip().endswith("blank.png: no face found in the image")
+    assert "Traceback" not in result.stderr and not (tmp_path / "m.obj").exists()
