@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import typer
 
 from .errors import FacesimError, InputError
@@ -68,7 +69,7 @@ MUSCLES = typer.Option(None, "--muscles", help="muscle file to use instead of th
 @app.command()
 @handled
 def render(
-    spec: Path = typer.Argument(..., help="expression spec (YAML)"),
+    spec: Optional[Path] = typer.Argument(None, help="expression spec (YAML); optional with --blend"),
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="out.mp4, out.gif, out.npz or a directory of PNGs (default out/<name>.mp4)"),
     size: str = SIZE,
     fps: Optional[float] = typer.Option(None, "--fps", help="playback rate (default: the spec's, 25)"),
@@ -81,17 +82,23 @@ def render(
     jobs: int = typer.Option(1, "--jobs", help="render frames in this many processes"),
     mesh: Optional[Path] = MESH,
     muscles: Optional[Path] = MUSCLES,
+    blend: Optional[str] = typer.Option(None, "--blend", help="blend expressions, e.g. happy=0.6,surprise=0.4"),
 ):
-    """Simulate one expression spec and render it."""
+    """Simulate one expression spec (or a blend of expressions) and render it."""
     from .output import check_output, progress_bar, write_animation
     from .simulate import simulate
-    from .spec import load_spec
+    from .spec import blend_spec, load_spec
 
     positive(jobs, "--jobs")
     if fps is not None and not 0 < fps <= 240:
         raise InputError(f"--fps: must be between 0 and 240, got {fps}")
     settings = settings_from(size, camera, wireframe, show_muscles, antialias)
-    loaded = load_spec(spec).with_overrides(mesh=mesh, muscles=muscles)
+    if spec is None and blend is None:
+        raise InputError("render: give a SPEC file, --blend, or both")
+    loaded = load_spec(spec) if spec else blend_spec(blend)
+    if spec and blend:
+        loaded = loaded.with_overrides(include=loaded.include + blend_spec(blend).include)
+    loaded = loaded.with_overrides(mesh=mesh, muscles=muscles)
     output = output or Path("out") / f"{loaded.title}.mp4"
     check_output(output, force, settings)
     animation = simulate(loaded)
@@ -244,7 +251,8 @@ def sheet(
     force: bool = FORCE,
     columns: int = typer.Option(3, "--columns"),
 ):
-    """The last frame of every expression in a labelled grid, the neutral face first."""
+    """Every expression at its apex in a labelled grid, the neutral face first: the last
+    frame of an expression that eases in and holds, the strongest of a sequence."""
     from .batch import collect_specs
     from .plots import contact_sheet
     from .render import FaceRenderer
@@ -266,11 +274,12 @@ def sheet(
         images.append(renderer.render(first.rest))
         for a in animations:
             same_mesh = a.rest.shape == first.rest.shape and (a.rest == first.rest).all()
+            strongest = a.positions[apex_frame(a)]
             if same_mesh:
-                images.append(renderer.render(a.positions[-1]))
+                images.append(renderer.render(strongest))
             else:
                 with FaceRenderer(a.rest, a.faces, settings, backend) as own:
-                    images.append(own.render(a.positions[-1]))
+                    images.append(own.render(strongest))
             labels.append(a.name.replace("_", " "))
     output.parent.mkdir(parents=True, exist_ok=True)
     contact_sheet(images, labels, output, columns)
@@ -292,6 +301,12 @@ def mesh_from_photo_command(
         raise InputError(f"{output}: already exists (use --force to overwrite)")
     built = mesh_from_photo(photo, output, symmetric=symmetrise)
     typer.echo(f"wrote {output}: {built.vertex_count} vertices, {len(built.faces)} triangles", err=True)
+
+
+def apex_frame(animation) -> int:
+    """The last frame at which the total activation is largest."""
+    total = animation.activations.sum(axis=1)
+    return int(len(total) - 1 - np.argmax(total[::-1]))
 
 
 def main():  # pragma: no cover - the console script

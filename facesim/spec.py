@@ -17,21 +17,95 @@ the muscle file and turns the spec into a (frames, muscles) table once, before s
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Annotated
 
 import numpy as np
-from pydantic import Field, PrivateAttr
+from typing import Literal
 
-from .config import DEFAULT_MESH, DEFAULT_MUSCLES
+from pydantic import Field, PrivateAttr, ValidationError, field_validator, model_validator
+
+from .config import DEFAULT_MESH, DEFAULT_MUSCLES, PROJECT_DIR
 from .errors import InputError
 from .model import Material
 from .muscles import MuscleSet
 from .schema import Strict, load_model
+from .timeline import (INTERPOLATIONS, apply_cooccurrence, au_muscles, check_exclusions, envelope_keys, interpolate,
+                       parse_intensity)
 
 Activation = Annotated[float, Field(ge=0.0, le=1.0)]
 #: More frames than this is taken for a typo: 100k frames is over an hour at 25 fps.
 MAX_FRAMES = 100_000
+#: MPEG-4's six high-level expressions (with FACS/Ekman names as aliases) and their specs.
+EKMAN = {"joy": "happy", "happy": "happy", "sadness": "sad", "sad": "sad", "anger": "angry", "angry": "angry",
+         "fear": "fear", "disgust": "disgust", "surprise": "surprise"}
+LIBRARY = PROJECT_DIR / "expressions"
+
+
+class Envelope(Strict):
+    """The common onset / apex / offset shape of an expression or action."""
+
+    start: float = Field(0.0, ge=0)
+    onset: float = Field(..., ge=0)
+    apex: float = Field(..., ge=0)
+    offset: float = Field(0.0, ge=0)
+    intensity: Activation = 1.0
+
+
+class Track(Strict):
+    """A key-framed curve for one muscle (``zygomaticus_major_l``), one action unit
+    (``AU12``) or one named expression (``happy``, a spec in expressions/, or a path)."""
+
+    target: str = Field(..., min_length=1)
+    keys: list[tuple[float, Activation]] | None = None
+    envelope: Envelope | None = None
+    unit: Literal["frame", "second"] = "frame"
+    interpolation: Literal[INTERPOLATIONS] = "hold"  # type: ignore[valid-type]
+    tension: float = Field(0.0, ge=0.0, le=1.0)
+
+    @model_validator(mode="after")
+    def _keys_or_envelope(self):
+        if (self.keys is None) == (self.envelope is None):
+            raise ValueError("give either keys or an envelope")
+        if self.keys is not None:
+            if not self.keys:
+                raise ValueError("keys: at least one key-frame")
+            times = [k[0] for k in self.keys]
+            if any(b <= a for a, b in zip(times, times[1:])):
+                raise ValueError(f"keys: out of order, times must increase strictly, got {times}")
+        return self
+
+    def key_frames(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        if self.envelope is not None:
+            e = self.envelope
+            keys = envelope_keys(e.start, e.onset, e.apex, e.offset, e.intensity)
+        else:
+            keys = self.keys
+        times, values = (np.array(v, dtype=float) for v in zip(*keys))
+        return (times / dt if self.unit == "second" else times), values
+
+
+class Include(Strict):
+    """Another spec blended in with a weight."""
+
+    spec: str = Field(..., min_length=1)
+    weight: float = Field(1.0, ge=0.0, le=1.0)
+
+
+class Segment(Strict):
+    """One expression of a sequence, held for ``frames``, reached over ``transition``."""
+
+    expression: str = Field(..., min_length=1)
+    frames: int = Field(..., ge=1)
+    transition: int = Field(0, ge=0)
+    intensity: Activation = 1.0
+
+    @model_validator(mode="after")
+    def _transition_fits(self):
+        if self.transition > self.frames:
+            raise ValueError(f"transition ({self.transition}) longer than the segment ({self.frames} frames)")
+        return self
 
 
 class Spec(Strict):
@@ -39,13 +113,46 @@ class Spec(Strict):
     description: str = ""
     frames: int = Field(35, ge=1, le=MAX_FRAMES)
     dt: float = Field(0.01, gt=0, le=1.0)
-    onset: int = Field(10, ge=0, description="frames to ease activations in; 0 for a step")
+    onset: int = Field(10, ge=0, description="frames to ease constant activations in; 0 for a step")
     fps: float = Field(25.0, gt=0, le=240, description="playback rate of the rendered video")
     activations: dict[str, Activation] = Field(default_factory=dict)
+    aus: dict[str, float | str] = Field(default_factory=dict, description="FACS action units: A-E or 0-1")
+    expressions: dict[str, Activation] = Field(default_factory=dict, description="MPEG-4 expressions by name")
+    timeline: list[Track] = Field(default_factory=list)
+    include: list[Include] = Field(default_factory=list)
+    sequence: list[Segment] = Field(default_factory=list)
     material: Material = Material()
     mesh: Path | None = None
     muscles: Path | None = None
     _source: Path | None = PrivateAttr(None)
+
+    @field_validator("aus")
+    @classmethod
+    def _facs(cls, aus):
+        out = {}
+        for au, value in aus.items():
+            if not re.fullmatch(r"AU\d+", au):
+                raise ValueError(f"{au!r} is not an action unit name such as AU12")
+            out[au] = parse_intensity(value)
+        check_exclusions(out)
+        return out
+
+    @field_validator("expressions")
+    @classmethod
+    def _ekman(cls, expressions):
+        for name in expressions:
+            if name not in EKMAN:
+                raise ValueError(f"{name!r} is not one of the six expressions ({', '.join(sorted(set(EKMAN.values())))})")
+        return expressions
+
+    @model_validator(mode="after")
+    def _sequence_frames(self):
+        if self.sequence:
+            total = sum(s.frames for s in self.sequence)
+            if "frames" in self.model_fields_set and self.frames != total:
+                raise ValueError(f"frames ({self.frames}) differs from the sequence's {total} frames; leave it out")
+            object.__setattr__(self, "frames", total)
+        return self
 
     @property
     def source(self) -> str:
@@ -74,6 +181,18 @@ class Spec(Strict):
         spec._source = self._source
         return spec
 
+    def resolve(self, name: str) -> Path | None:
+        """An expression named in this spec: a spec file (relative to this one), a spec of
+        the library in expressions/ (happy, happy_surprise, ...), an MPEG-4 name (joy, ...),
+        or None for ``neutral``."""
+        if name == "neutral":
+            return None
+        here = self._source.parent if self._source else Path.cwd()
+        for candidate in (here / name, LIBRARY / f"{EKMAN.get(name, name)}.yaml"):
+            if candidate.suffix in (".yaml", ".yml") and candidate.is_file():
+                return candidate
+        raise InputError(f"{self.source}: {name!r} is neither a muscle, an action unit, nor an expression spec")
+
 
 def load_spec(path: str | Path) -> Spec:
     """Read and validate an expression spec (one-line InputError on any problem)."""
@@ -83,14 +202,111 @@ def load_spec(path: str | Path) -> Spec:
     return spec
 
 
-def activation_table(spec: Spec, muscles: MuscleSet) -> np.ndarray:
-    """(frames, muscles) activations: each muscle eases in over ``onset`` frames with
-    Parke's cosine and holds. Unknown muscle names are an error."""
-    table = np.zeros((spec.frames, muscles.count))
-    frame = np.arange(1, spec.frames + 1)
-    ease = np.ones(spec.frames) if spec.onset == 0 else 0.5 - 0.5 * np.cos(np.pi * np.minimum(frame / spec.onset, 1.0))
+def blend_spec(blend: str, frames: int | None = None) -> Spec:
+    """A spec from the CLI's ``--blend happy=0.6,surprise=0.4``."""
+    includes = []
+    for part in blend.split(","):
+        name, _, weight = part.partition("=")
+        try:
+            includes.append(Include(spec=name.strip(), weight=float(weight) if weight else 1.0))
+        except (ValueError, ValidationError):
+            raise InputError(f"--blend: expected name=weight pairs with weights in [0, 1], got {part!r}") from None
+    spec = Spec(name="blend_" + "_".join(i.spec for i in includes), include=includes, **({"frames": frames} if frames else {}))
+    for i in includes:
+        spec.resolve(i.spec)  # an unknown name fails now, with the option's name
+    return spec
+
+
+def _ease(frames: int, onset: int) -> np.ndarray:
+    frame = np.arange(1, frames + 1)
+    return np.ones(frames) if onset == 0 else 0.5 - 0.5 * np.cos(np.pi * np.minimum(frame / onset, 1.0))
+
+
+def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndarray:
+    """(frames, muscles) activations, in [0, 1]: the sum of
+
+    - ``activations``, eased in over ``onset`` frames with Parke's cosine and held;
+    - ``expressions`` (MPEG-4): each named expression's final activations times its
+      intensity, eased in the same way;
+    - ``aus``: FACS action units through their muscles, eased in the same way, together
+      with the action-unit tracks after the co-occurrence rules;
+    - ``timeline``: key-framed curves of muscles, action units and expressions;
+    - ``include``: other specs' tables (at this spec's frames and Δt) times their weights;
+    - ``sequence``: expressions one after another, each reached over its transition.
+
+    The sum is clipped to [0, 1]; below that it is linear in every weight and intensity.
+    """
+    if _depth > 8:
+        raise InputError(f"{spec.source}: include: specs include each other in a cycle")
+    names = muscles.names
+    frames = spec.frames
+    table = np.zeros((frames, len(names)))
+    ease = _ease(frames, spec.onset)
+    query = np.arange(frames, dtype=float)
+
+    def fail(where: str, message: str):
+        raise InputError(f"{spec.source}: {where}: {message}")
+
+    def muscle_vector(name: str, where: str) -> np.ndarray:
+        if name not in names:
+            fail(where, "unknown muscle (see `facesim muscles`)")
+        v = np.zeros(len(names))
+        v[names.index(name)] = 1.0
+        return v
+
+    def expression_vector(name: str) -> np.ndarray:
+        path = spec.resolve(name)
+        if path is None:
+            return np.zeros(len(names))
+        return activation_table(load_spec(path), muscles, _depth + 1)[-1]
+
+    def au_vector(au: str, where: str) -> np.ndarray:
+        try:
+            weights = au_muscles(au, names)
+        except ValueError as exc:
+            fail(where, str(exc))
+        v = np.zeros(len(names))
+        for muscle, weight in weights.items():
+            v[names.index(muscle)] = weight
+        return v
+
     for name, value in spec.activations.items():
-        if name not in muscles.names:
-            raise InputError(f"{spec.source}: activations -> {name}: unknown muscle (see `facesim muscles`)")
-        table[:, muscles.index(name)] = value * ease
-    return table
+        table += np.outer(ease * value, muscle_vector(name, f"activations -> {name}"))
+    for name, intensity in spec.expressions.items():
+        table += np.outer(ease * intensity, expression_vector(name))
+
+    au_curves = {au: ease * value for au, value in spec.aus.items()}
+    for k, track in enumerate(spec.timeline):
+        times, values = track.key_frames(spec.dt)
+        curve = interpolate(times, values, query, track.interpolation, track.tension)
+        where = f"timeline -> {k} -> target"
+        if re.fullmatch(r"AU\d+", track.target):
+            au_curves[track.target] = au_curves.get(track.target, 0) + curve
+        elif track.target in names:
+            table += np.outer(curve, muscle_vector(track.target, where))
+        else:
+            table += np.outer(curve, expression_vector(track.target))
+    try:
+        check_exclusions(au_curves)
+    except ValueError as exc:
+        fail("aus", str(exc))
+    for au, curve in apply_cooccurrence({a: np.clip(c, 0, 1) for a, c in au_curves.items()}).items():
+        table += np.outer(curve, au_vector(au, f"aus -> {au}"))
+
+    for k, include in enumerate(spec.include):
+        path = spec.resolve(include.spec)
+        if path is None:
+            continue
+        included = load_spec(path).with_overrides(frames=frames, dt=spec.dt)
+        table += include.weight * activation_table(included, muscles, _depth + 1)
+
+    start, previous = 0, np.zeros(len(names))
+    for segment in spec.sequence:
+        target = segment.intensity * expression_vector(segment.expression)
+        ramp = np.ones(segment.frames)
+        if segment.transition:
+            step = np.minimum(np.arange(1, segment.frames + 1) / segment.transition, 1.0)
+            ramp = (1 - np.cos(np.pi * step)) / 2
+        table[start:start + segment.frames] += previous + np.outer(ramp, target - previous)
+        start, previous = start + segment.frames, target
+    return np.clip(table, 0.0, 1.0)

@@ -1,0 +1,161 @@
+"""Animation control on top of the physics: key-frame curves, FACS action units, the
+MPEG-4 style expressions and their blends, and sequences. Everything here ends in one
+(frames, muscles) activation table, built once before the simulation.
+
+Interpolation between key-frames (the parametric key-frame seed, section 3):
+
+- ``linear``    straight lines between keys;
+- ``cosine``    Parke's ease in and out, v0 + (v1 - v0) (1 - cos πF) / 2;
+- ``bspline``   the uniform cubic B-spline with the keys as control points (its eq. 3),
+                which approximates rather than passes through the inner keys;
+- ``cardinal``  the cardinal spline through every key with tangents
+                (1 - tension) (p[i+1] - p[i-1]) / 2 (its eq. 4-6);
+- ``hold``      the seed's modified cardinal spline: where two neighbouring keys are
+                equal the curve holds flat, and at every key that is a local extremum the
+                tangent is zero, so it neither drifts between equal keys nor overshoots.
+
+F runs from 0 to 1 across each segment; before the first key and after the last the curve
+holds the end values. The outer control points are the end keys reflected
+(p[-1] = 2 p[0] - p[1]), so every curve starts and ends exactly on its end keys.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+INTERPOLATIONS = ("linear", "cosine", "bspline", "cardinal", "hold")
+
+
+def _segments(times: np.ndarray, query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each query time: its segment i (keys i, i+1) and F in [0, 1]."""
+    clamped = np.clip(query, times[0], times[-1])
+    i = np.clip(np.searchsorted(times, clamped, side="right") - 1, 0, len(times) - 2)
+    return i, (clamped - times[i]) / (times[i + 1] - times[i])
+
+
+def interpolate(times, values, query, kind: str = "linear", tension: float = 0.0) -> np.ndarray:
+    """The curve through key-frames (times strictly increasing) at the query times."""
+    times = np.asarray(times, dtype=float)
+    values = np.asarray(values, dtype=float)
+    query = np.asarray(query, dtype=float)
+    if len(times) == 1:
+        return np.full(query.shape, values[0])
+    i, f = _segments(times, query)
+    padded = np.concatenate([[2 * values[0] - values[1]], values, [2 * values[-1] - values[-2]]])
+    p0, p1, p2, p3 = padded[i], padded[i + 1], padded[i + 2], padded[i + 3]
+    if kind == "linear":
+        return p1 + f * (p2 - p1)
+    if kind == "cosine":
+        return p1 + (p2 - p1) * (1 - np.cos(np.pi * f)) / 2
+    if kind == "bspline":
+        return ((1 - f) ** 3 * p0 + (3 * f**3 - 6 * f**2 + 4) * p1 + (-3 * f**3 + 3 * f**2 + 3 * f + 1) * p2 + f**3 * p3) / 6
+    if kind in ("cardinal", "hold"):
+        tangent = (1 - tension) * (padded[2:] - padded[:-2]) / 2  # at every key
+        if kind == "hold":
+            flat = (padded[1:-1] - padded[:-2]) * (padded[2:] - padded[1:-1]) <= 0
+            tangent = np.where(flat, 0.0, tangent)
+        m1, m2 = tangent[i], tangent[i + 1]
+        return ((2 * f**3 - 3 * f**2 + 1) * p1 + (-2 * f**3 + 3 * f**2) * p2 + (f**3 - 2 * f**2 + f) * m1
+                + (f**3 - f**2) * m2)
+    raise ValueError(f"unknown interpolation {kind!r}")
+
+
+def envelope_keys(start: float, onset: float, apex: float, offset: float, intensity: float) -> list[tuple[float, float]]:
+    """The common onset / apex / offset envelope as key-frames: rise, hold, fall."""
+    keys = [(start, 0.0), (start + onset, intensity), (start + onset + apex, intensity)]
+    if offset > 0:
+        keys.append((start + onset + apex + offset, 0.0))
+    return keys
+
+
+# --- FACS action units ----------------------------------------------------------------
+
+#: Action unit -> (name, muscles and how much of each). Muscles are given without side;
+#: an AU drives both sides. AUs whose muscles the face does not have are errors.
+ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
+    "AU1": ("inner brow raiser", {"frontalis_medial": 1.0}),
+    "AU2": ("outer brow raiser", {"frontalis_lateral": 1.0, "frontalis_outer": 1.0}),
+    "AU4": ("brow lowerer", {"corrugator_supercilii": 1.0, "procerus": 1.0}),
+    "AU6": ("cheek raiser", {"orbicularis_oculi": 1.0}),
+    "AU7": ("lid tightener", {"orbicularis_oculi": 0.5}),
+    "AU9": ("nose wrinkler", {"levator_labii_superioris_alaeque_nasi": 1.0}),
+    "AU10": ("upper lip raiser", {"levator_labii_superioris": 1.0}),
+    "AU11": ("nasolabial deepener", {"zygomaticus_minor": 1.0}),
+    "AU12": ("lip corner puller", {"zygomaticus_major": 1.0}),
+    "AU13": ("sharp lip puller", {"levator_anguli_oris": 1.0}),
+    "AU14": ("dimpler", {"risorius": 0.6}),
+    "AU15": ("lip corner depressor", {"depressor_anguli_oris": 1.0}),
+    "AU16": ("lower lip depressor", {"depressor_labii_inferioris": 1.0}),
+    "AU17": ("chin raiser", {"mentalis": 1.0}),
+    "AU18": ("lip pucker", {"orbicularis_oris": 1.0}),
+    "AU20": ("lip stretcher", {"risorius": 1.0}),
+    "AU22": ("lip funneler", {"orbicularis_oris": 0.7}),
+    "AU23": ("lip tightener", {"orbicularis_oris": 0.8}),
+    "AU24": ("lip pressor", {"orbicularis_oris": 0.9}),
+    "AU26": ("jaw drop", {"jaw": 1.0}),
+    "AU27": ("mouth stretch", {"jaw": 1.0}),
+    "AU43": ("eyes closed", {"eyelids": 1.0}),
+    "AU45": ("blink", {"eyelids": 1.0}),
+}
+#: FACS intensity letters, trace (A) to maximum (E).
+FACS_LETTERS = {"A": 0.2, "B": 0.4, "C": 0.6, "D": 0.8, "E": 1.0}
+
+#: Co-occurrence rules, applied to AU intensities frame by frame, in this order:
+#: domination: when both act, the dominated AU is weakened by the dominant one,
+#:   I_dominated * (1 - I_dominant) (FACS: AU15 dominates AU12);
+#: opposition: antagonists acting on the same tissue cancel, the stronger keeps the
+#:   difference (AU16 pulls the lower lip down, AU17 pushes it up);
+#: exclusion: AUs that the model cannot show together are an error in a spec (AU14 and
+#:   AU20 both come from the risorius here).
+DOMINATION = [("AU15", "AU12")]
+OPPOSITION = [("AU16", "AU17")]
+EXCLUSION = [("AU14", "AU20")]
+
+
+def parse_intensity(value) -> float:
+    """A FACS letter A-E or a number in [0, 1]."""
+    if isinstance(value, str):
+        letter = value.strip().upper()
+        if letter not in FACS_LETTERS:
+            raise ValueError(f"intensity must be a FACS letter A-E or a number 0-1, got {value!r}")
+        return FACS_LETTERS[letter]
+    value = float(value)
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f"intensity must be between 0 and 1, got {value}")
+    return value
+
+
+def check_exclusions(aus) -> None:
+    for a, b in EXCLUSION:
+        if a in aus and b in aus:
+            raise ValueError(f"{a} and {b} exclude each other (both are the {_muscle_words(a)} in this face)")
+
+
+def _muscle_words(au: str) -> str:
+    return " and ".join(m.replace("_", " ") for m in ACTION_UNITS[au][1])
+
+
+def apply_cooccurrence(intensity: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Domination and opposition rules on per-frame AU intensities."""
+    out = dict(intensity)
+    for dominant, dominated in DOMINATION:
+        if dominant in out and dominated in out:
+            out[dominated] = out[dominated] * (1 - out[dominant])
+    for a, b in OPPOSITION:
+        if a in out and b in out:
+            out[a], out[b] = np.maximum(out[a] - out[b], 0), np.maximum(out[b] - out[a], 0)
+    return out
+
+
+def au_muscles(au: str, muscle_names: tuple[str, ...]) -> dict[str, float]:
+    """The muscles (with sides) an AU drives on this face; an error naming what is missing."""
+    if au not in ACTION_UNITS:
+        raise ValueError(f"unknown action unit {au!r} (known: {', '.join(ACTION_UNITS)})")
+    name, muscles = ACTION_UNITS[au]
+    out = {}
+    for muscle, weight in muscles.items():
+        found = [n for n in muscle_names if n == muscle or n in (f"{muscle}_l", f"{muscle}_r")]
+        if not found:
+            raise ValueError(f"{au} ({name}) needs the {muscle.replace('_', ' ')}, which this face's muscle file does not have")
+        out.update({n: weight for n in found})
+    return out

@@ -1,0 +1,171 @@
+"""Key-frame interpolation, FACS action units, MPEG-4 expressions, blending and sequences."""
+
+import numpy as np
+import pytest
+import yaml
+
+import facesim
+from conftest import EXPRESSIONS
+from facesim.errors import InputError
+from facesim.simulate import model_for
+from facesim.spec import activation_table, blend_spec, load_spec
+from facesim.timeline import interpolate
+
+PEAK = ([0, 10, 20], [0.0, 1.0, 0.0])
+PLATEAU = ([0, 10, 20, 30], [0.0, 1.0, 1.0, 0.0])
+
+
+@pytest.mark.parametrize("kind, t, expected", [
+    ("linear", 5, 0.5), ("linear", 15, 0.5), ("linear", -3, 0.0), ("linear", 25, 0.0),
+    ("cosine", 2.5, (1 - np.cos(np.pi / 4)) / 2), ("cosine", 10, 1.0),
+    # B-spline (seed eq. 3), outer control points reflected: -1, 0, 1, 0, -1
+    ("bspline", 5, (0.125 * -1 + 2.875 * 1) / 6), ("bspline", 10, 4 / 6), ("bspline", 0, 0.0), ("bspline", 20, 0.0),
+    # cardinal (seed eq. 4-6), tension 0: tangents 1, 0, -1
+    ("cardinal", 5, 0.5 + 0.125), ("cardinal", 10, 1.0), ("cardinal", 20, 0.0),
+])
+def test_interpolation_against_hand_computed_values(kind, t, expected):
+    assert interpolate(*PEAK, [t], kind)[0] == pytest.approx(expected, abs=1e-12)
+
+
+def test_cardinal_tension_loosens_the_tangents():
+    assert interpolate(*PEAK, [5], "cardinal", tension=0.5)[0] == pytest.approx(0.5 + 0.125 * 0.5)
+    assert interpolate(*PEAK, [5], "cardinal", tension=1.0)[0] == pytest.approx(0.5)
+
+
+def test_hold_keeps_equal_keys_flat_where_the_cardinal_spline_drifts():
+    t = np.linspace(0, 30, 301)
+    cardinal = interpolate(*PLATEAU, t, "cardinal")
+    hold = interpolate(*PLATEAU, t, "hold")
+    assert interpolate(*PLATEAU, [15], "cardinal")[0] == pytest.approx(1.125)  # the seed's fig. 14
+    assert np.all(hold[(t >= 10) & (t <= 20)] == 1.0)
+    assert hold.max() == 1.0 and hold.min() == 0.0 and cardinal.max() > 1.1
+    assert np.all(np.diff(hold[t <= 10]) >= 0) and np.all(np.diff(hold[t >= 20]) <= 0)  # no overshoot
+
+
+def write(tmp_path, data, name="spec"):
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.fixture(scope="module")
+def muscles():
+    return model_for(facesim.load_spec(EXPRESSIONS / "happy.yaml")).muscles
+
+
+def table(tmp_path, muscles, **data):
+    return activation_table(load_spec(write(tmp_path, {"frames": 40, **data})), muscles)
+
+
+def column(muscles, table_, name):
+    return table_[:, muscles.index(name)]
+
+
+def test_envelope_and_seconds_are_key_frames(tmp_path, muscles):
+    by_envelope = table(tmp_path, muscles, timeline=[{"target": "risorius_l", "interpolation": "linear",
+                                                      "envelope": {"start": 5, "onset": 10, "apex": 10, "offset": 10, "intensity": 0.8}}])
+    by_keys = table(tmp_path, muscles, timeline=[{"target": "risorius_l", "interpolation": "linear", "unit": "second",
+                                                  "keys": [[0.05, 0], [0.15, 0.8], [0.25, 0.8], [0.35, 0]]}])
+    r = column(muscles, by_envelope, "risorius_l")
+    assert np.allclose(r, column(muscles, by_keys, "risorius_l"))
+    assert r[5] == 0 and r[10] == pytest.approx(0.4) and r[15] == r[25] == pytest.approx(0.8) and r[35:].max() == 0
+    assert by_envelope[:, [i for i, n in enumerate(muscles.names) if n != "risorius_l"]].max() == 0
+
+
+def test_blending_is_linear_in_the_activations(tmp_path, muscles):
+    happy, surprise = (activation_table(load_spec(EXPRESSIONS / f"{n}.yaml"), muscles) for n in ("happy", "surprise"))
+    blend = activation_table(blend_spec("happy=0.6,surprise=0.4"), muscles)
+    assert np.allclose(blend, 0.6 * happy + 0.4 * surprise)
+    included = table(tmp_path, muscles, frames=35, include=[{"spec": "happy", "weight": 0.3}])
+    assert np.allclose(included, 0.3 * happy)
+
+
+def test_mpeg4_expressions_by_name_with_intensity(tmp_path, muscles):
+    happy = activation_table(load_spec(EXPRESSIONS / "happy.yaml").with_overrides(frames=40), muscles)
+    joy = table(tmp_path, muscles, expressions={"joy": 0.5})
+    assert np.allclose(joy, 0.5 * happy)
+    with pytest.raises(InputError, match=r"expressions: Value error, 'contempt' is not one of the six"):
+        table(tmp_path, muscles, expressions={"contempt": 0.5})
+
+
+def test_action_units_drive_their_muscles_with_facs_letters(tmp_path, muscles):
+    t = table(tmp_path, muscles, onset=0, aus={"AU12": "E", "AU1": "C", "AU4": 0.5})
+    last = dict(zip(muscles.names, t[-1]))
+    assert last["zygomaticus_major_l"] == last["zygomaticus_major_r"] == 1.0
+    assert last["frontalis_medial_l"] == pytest.approx(0.6)
+    assert last["corrugator_supercilii_r"] == last["procerus"] == 0.5
+    assert sum(v > 0 for v in last.values()) == 2 + 2 + 3
+
+
+def test_an_action_unit_without_its_muscles_is_an_error(tmp_path, muscles):
+    with pytest.raises(InputError, match=r"aus -> AU6: AU6 \(cheek raiser\) needs the orbicularis oculi"):
+        table(tmp_path, muscles, aus={"AU6": 0.8, "AU12": 1.0})
+    with pytest.raises(InputError, match=r"aus: Value error, intensity must be a FACS letter A-E"):
+        table(tmp_path, muscles, aus={"AU12": "F"})
+
+
+def test_domination_opposition_and_exclusion(tmp_path, muscles):
+    t = table(tmp_path, muscles, onset=0, aus={"AU12": 1.0, "AU15": 0.75, "AU16": 0.9, "AU17": 0.3})[-1]
+    last = dict(zip(muscles.names, t))
+    assert last["zygomaticus_major_l"] == pytest.approx(0.25)  # AU15 dominates AU12
+    assert last["depressor_anguli_oris_l"] == 0.75
+    assert last["depressor_labii_inferioris_l"] == pytest.approx(0.6) and last["mentalis_l"] == 0  # opposition
+    with pytest.raises(InputError, match="AU14 and AU20 exclude each other"):
+        table(tmp_path, muscles, aus={"AU14": 0.5, "AU20": 0.5})
+    with pytest.raises(InputError, match="AU14 and AU20 exclude each other"):
+        table(tmp_path, muscles, aus={"AU14": 0.5}, timeline=[{"target": "AU20", "keys": [[0, 0.5]]}])
+
+
+def test_sequences_hold_each_expression_and_ease_between(tmp_path, muscles):
+    spec = load_spec(EXPRESSIONS / "sequence.yaml")
+    t = activation_table(spec, muscles)
+    assert spec.frames == len(t) == 120
+    happy = activation_table(load_spec(EXPRESSIONS / "happy.yaml"), muscles)[-1]
+    surprise = activation_table(load_spec(EXPRESSIONS / "surprise.yaml"), muscles)[-1]
+    assert t[:10].max() == 0
+    assert np.allclose(t[25:50], happy) and np.allclose(t[65:90], surprise) and t[105:].max() == 0
+    steps = np.abs(np.diff(t, axis=0)).max(axis=1)
+    assert steps.max() < 0.2  # smooth transitions, no jumps
+    with pytest.raises(InputError, match=r"frames \(50\) differs from the sequence's 120 frames"):
+        load_spec(write(tmp_path, {**yaml.safe_load((EXPRESSIONS / "sequence.yaml").read_text()), "frames": 50}))
+
+
+@pytest.mark.parametrize("track, message", [
+    ({"target": "risorius_l", "keys": [[10, 1.0], [5, 0.0]]}, "keys: out of order"),
+    ({"target": "risorius_l", "keys": [[0, 1.0]], "interpolation": "quadratic"}, "interpolation: Input should be 'linear'"),
+    ({"target": "risorius_l", "keys": [[0, 1.0]], "interpolation": "cardinal", "tension": 1.5}, "tension: Input should be less than or equal to 1"),
+    ({"target": "risorius_l", "keys": [[0, 1.5]]}, "less than or equal to 1"),
+    ({"target": "risorius_l"}, "give either keys or an envelope"),
+    ({"target": "smile", "keys": [[0, 1.0]]}, "'smile' is neither a muscle, an action unit, nor an expression spec"),
+])
+def test_bad_timelines_are_one_line_errors(tmp_path, muscles, track, message):
+    with pytest.raises(InputError, match=message) as info:
+        table(tmp_path, muscles, timeline=[track])
+    assert str(info.value).startswith(str(tmp_path / "spec.yaml")) and "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("name", ["happy_surprise", "disgusted_anger"])
+def test_composite_expressions_as_blends_of_the_basic_ones(name):
+    composite = facesim.simulate(load_spec(EXPRESSIONS / f"{name}.yaml"))
+    blend = facesim.simulate(load_spec(EXPRESSIONS / "blends" / f"{name}.yaml"))
+    assert blend.inverted.max() == 0
+    shape_gap = np.linalg.norm(composite.positions[-1] - blend.positions[-1], axis=1)
+    motion = np.linalg.norm(composite.positions[-1] - composite.rest, axis=1)
+    # the blend makes nearly the same expression: most of the face within 0.3 mm...
+    assert np.median(shape_gap) < 0.03 and shape_gap.max() < 0.75 * motion.max()
+    if name == "happy_surprise":
+        # ...the brows exactly (the frontalis come from surprise unchanged), the lip
+        # corners within a millimetre (surprise adds its mouth muscles)
+        for v in (105, 334, 70, 300):
+            assert shape_gap[v] < 1e-3
+        assert shape_gap[[61, 291]].max() < 0.1
+    else:
+        # ...but disgust is one-sided, so the blend is not symmetric where the composite is
+        assert abs(blend.positions[-1][269, 1] - blend.positions[-1][39, 1]) > 0.05
+
+
+def test_the_sequence_simulates_without_inverting():
+    animation = facesim.simulate(load_spec(EXPRESSIONS / "sequence.yaml"))
+    assert animation.frames == 120 and animation.inverted.max() == 0
+    lift = animation.positions[:, 61, 1] - animation.rest[61, 1]
+    assert lift[45] > 0.1 and abs(lift[-1]) < 0.05
