@@ -42,9 +42,12 @@ bench: setup
 mesh: setup $(VENV)/.photo
 	$(BIN)/python scripts/build_face_mesh.py -o meshes/face.obj
 
+THESIS_SPECS := $(addprefix expressions/,$(addsuffix .yaml,happy sad angry fear disgust surprise disgusted_anger happy_surprise))
+
 docs: setup
-	$(BIN)/facesim sheet expressions -o docs/expressions.png --force
+	$(BIN)/facesim sheet $(THESIS_SPECS) -o docs/expressions.png --force
 	$(BIN)/facesim muscles --plot docs/muscles.png > /dev/null
+	$(BIN)/facesim render expressions/sequence.yaml -o docs/sequence.gif --size 256x256 --fps 25 --force
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

@@ -244,7 +244,7 @@ def muscles_command(
 @app.command()
 @handled
 def sheet(
-    directory: Path = typer.Argument(..., help="directory of expression specs"),
+    inputs: list[Path] = typer.Argument(..., help="expression specs or directories of them"),
     output: Path = typer.Option(..., "-o", "--output", help="PNG to write"),
     size: str = typer.Option("384x384", "--size", help="size of each face"),
     backend: str = BACKEND,
@@ -265,7 +265,7 @@ def sheet(
     if output.exists() and not force:
         raise InputError(f"{output}: already exists (use --force to overwrite)")
     order = {name: k for k, name in enumerate(THESIS_ORDER)}
-    specs = sorted((load_spec(p) for p in collect_specs([directory])), key=lambda s: (order.get(s.title, len(order)), s.title))
+    specs = sorted((load_spec(p) for p in collect_specs(inputs)), key=lambda s: (order.get(s.title, len(order)), s.title))
     animations = [simulate(s) for s in specs]
     first = animations[0]
     settings = settings_from(size, "front")

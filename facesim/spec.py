@@ -7,7 +7,12 @@ time step. A spec is a YAML file validated by pydantic (unknown fields are error
     onset: 10                   # frames over which activations ease in (Parke's cosine)
     activations:                # muscle: activation in [0, 1]
       zygomaticus_major_l: 1.0
-    material: {damping: 20}     # optional overrides of facesim.model.Material
+    aus: {AU12: D}              # FACS action units (facesim.timeline)
+    expressions: {joy: 0.5}     # MPEG-4 expressions by name
+    timeline: [...]             # key-framed tracks of muscles, AUs, expressions
+    include: [{spec: happy, weight: 0.6}]   # blends of other specs
+    sequence: [...]             # expressions one after another
+    material: {damping: 40}     # optional overrides of facesim.model.Material
     mesh: my_face.obj           # optional, relative to the spec (default: meshes/face.obj)
     muscles: my_face.muscles.yaml
 

@@ -120,6 +120,18 @@ def test_wireframe_show_muscles_and_parallel_frames(tmp_path):
     assert np.array_equal(last["jobs"], last["plain"])  # same frames from two processes
 
 
+def test_render_a_blend_without_a_spec_file(tmp_path):
+    facesim("render", "--blend", "happy=0.6,surprise=0.4", "-o", tmp_path / "b.npz", check=0)
+    data = np.load(tmp_path / "b.npz")
+    muscles = list(data["muscles"])
+    last = data["activations"][-1]
+    assert last[muscles.index("zygomaticus_major_l")] == pytest.approx(0.6)
+    assert last[muscles.index("frontalis_outer_r")] == pytest.approx(0.4)
+    one_line_error(facesim("render", "--blend", "happy=2", "-o", tmp_path / "c.npz"), 2, "--blend")
+    one_line_error(facesim("render", "--blend", "grin=0.5", "-o", tmp_path / "c.npz"), 2, "'grin'")
+    one_line_error(facesim("render", "-o", tmp_path / "c.npz"), 2, "give a SPEC file, --blend, or both")
+
+
 def test_existing_output_needs_force(tmp_path):
     spec = write_spec(tmp_path)
     out = tmp_path / "x.npz"
@@ -129,7 +141,8 @@ def test_existing_output_needs_force(tmp_path):
 
 
 def test_batch_of_the_eight_expressions(tmp_path):
-    result = facesim("batch", EXPRESSIONS, "-o", tmp_path, "--size", "128x128", "--jobs", "2", check=0)
+    specs = [EXPRESSIONS / f"{name}.yaml" for name in THESIS_EXPRESSIONS]
+    result = facesim("batch", *specs, "-o", tmp_path, "--size", "128x128", "--jobs", "2", check=0)
     for name in THESIS_EXPRESSIONS:
         frames = mp4_frames(tmp_path / f"{name}.mp4")
         assert frames.shape == (35, 128, 128, 3), name
@@ -158,7 +171,7 @@ def test_validate_info_muscles_and_sheet(tmp_path):
     listing = facesim("muscles", "--plot", tmp_path / "m.png", check=0).stdout
     assert "zygomaticus_major_l" in listing and "procerus" in listing
     assert iio.imread(tmp_path / "m.png").shape[0] > 500
-    facesim("sheet", EXPRESSIONS, "-o", tmp_path / "sheet.png", "--size", "96x96", check=0)
+    facesim("sheet", EXPRESSIONS, "-o", tmp_path / "sheet.png", "--size", "96x96", check=0)  # a directory
     sheet = iio.imread(tmp_path / "sheet.png")
     assert sheet.shape[0] >= 3 * 96 and sheet.shape[1] >= 3 * 96
 
