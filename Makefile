@@ -48,6 +48,8 @@ docs: setup
 	$(BIN)/facesim sheet $(THESIS_SPECS) -o docs/expressions.png --force
 	$(BIN)/facesim muscles --plot docs/muscles.png > /dev/null
 	$(BIN)/facesim render expressions/sequence.yaml -o docs/sequence.gif --size 256x256 --fps 25 --force
+	rm -rf out/dataset-docs
+	$(BIN)/facesim dataset --n 12 --seed 3 --jitter --size 192x192 -o out/dataset-docs --sheet docs/dataset.png
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

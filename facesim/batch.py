@@ -1,6 +1,6 @@
-"""Rendering many specs at once: each in its own process (spawn), one renderer per
-process reused for every spec of the same mesh. A failing spec is reported and the
-others still finish."""
+"""Rendering many specs at once: each in its own process (spawn, or the workers of a Dask
+cluster), one renderer per process reused for every spec of the same mesh. A failing
+spec is reported and the others still finish."""
 
 from __future__ import annotations
 
@@ -64,23 +64,29 @@ def render_one(spec_path: Path, output: Path, settings: RenderSettings, backend:
 
 
 def run_batch(specs: list[Path], outdir: Path, suffix: str, settings: RenderSettings, backend: str, jobs: int,
-              force: bool, mesh: Path | None = None, muscles: Path | None = None, on_done=None) -> list[BatchResult]:
+              force: bool, mesh: Path | None = None, muscles: Path | None = None, on_done=None,
+              executor: str = "local", scheduler: str | None = None) -> list[BatchResult]:
     outputs = [outdir / (s.stem + suffix) for s in specs]
     if len(set(outputs)) != len(outputs):
         raise InputError("two specs share a file name; their outputs would collide in " + str(outdir))
     args = [(s, o, settings, backend, force, mesh, muscles) for s, o in zip(specs, outputs)]
     results: dict[Path, BatchResult] = {}
-    if jobs <= 1:
+
+    def done(result: BatchResult) -> None:
+        results[result.spec] = result
+        if on_done:
+            on_done(result)
+
+    if executor == "dask":
+        from .dataset import dask_client, run_on_dask
+
+        run_on_dask(dask_client(scheduler, jobs), render_one, list(zip(*args)), done)
+    elif jobs <= 1:
         for a in args:
-            results[a[0]] = render_one(*a)
-            if on_done:
-                on_done(results[a[0]])
+            done(render_one(*a))
     else:
         with ProcessPoolExecutor(min(jobs, len(args)), mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = [pool.submit(render_one, *a) for a in args]
             for future in as_completed(futures):
-                result = future.result()
-                results[result.spec] = result
-                if on_done:
-                    on_done(result)
+                done(future.result())
     return [results[s] for s in specs]

@@ -123,6 +123,8 @@ def batch(
     force: bool = FORCE,
     mesh: Optional[Path] = MESH,
     muscles: Optional[Path] = MUSCLES,
+    executor: str = typer.Option("local", "--executor", help="local (processes) or dask"),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="tcp://HOST:PORT of a Dask scheduler"),
 ):
     """Render many specs in parallel; a failing spec does not stop the others."""
     from rich.console import Console
@@ -132,6 +134,8 @@ def batch(
     from .output import progress_bar
 
     positive(jobs, "--jobs")
+    if executor not in ("local", "dask"):
+        raise InputError(f"--executor: expected local or dask, got {executor!r}")
     suffix = {"mp4": ".mp4", "gif": ".gif", "npz": ".npz", "png": ""}.get(fmt)
     if suffix is None:
         raise InputError(f"--format: expected mp4, gif, npz or png, got {fmt!r}")
@@ -143,7 +147,7 @@ def batch(
         raise InputError(f"{outdir}: cannot create the output directory ({exc.strerror})") from None
     with progress_bar(len(specs), "batch") as advance:
         results = run_batch(specs, outdir, suffix, settings, backend, jobs, force, mesh, muscles,
-                            on_done=(lambda _: advance()) if advance else None)
+                            on_done=(lambda _: advance()) if advance else None, executor=executor, scheduler=scheduler)
     table = Table(title=f"facesim batch: {len(specs)} specs")
     for column in ("spec", "muscles", "frames", "simulation (ms)", "render (s)", "fps", "output"):
         table.add_column(column, justify="left" if column in ("spec", "output") else "right")
@@ -284,6 +288,35 @@ def sheet(
     output.parent.mkdir(parents=True, exist_ok=True)
     contact_sheet(images, labels, output, columns)
     typer.echo(f"wrote {output}: {len(images)} faces", err=True)
+
+
+@app.command()
+@handled
+def dataset(
+    output: Path = typer.Option(..., "-o", "--output", help="dataset directory (a rerun finishes it)"),
+    n: int = typer.Option(..., "--n", help="number of samples"),
+    seed: int = typer.Option(0, "--seed", help="the same seed gives the same dataset on any executor"),
+    executor: str = typer.Option("local", "--executor", help="local (processes) or dask"),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="tcp://HOST:PORT of a Dask scheduler"),
+    jobs: int = typer.Option(2, "--jobs", help="worker processes (local, or the Dask LocalCluster)"),
+    size: str = typer.Option("256x256", "--size", help="image size WxH"),
+    jitter: bool = typer.Option(False, "--jitter", help="vary the camera and the lights per sample"),
+    backend: str = BACKEND,
+    sheet_png: Optional[Path] = typer.Option(None, "--sheet", help="also draw the first 12 samples to this PNG"),
+):
+    """Render N labelled expressions (PNG + labels + manifest) for training recognisers."""
+    from .dataset import DatasetSettings, build_dataset, dataset_sheet
+    from .output import progress_bar
+    from .render import parse_size
+
+    width, height = parse_size(size)
+    settings = DatasetSettings(seed, width, height, jitter, backend)
+    with progress_bar(max(n, 0), "dataset") as advance:
+        manifest = build_dataset(output, n, settings, executor, jobs, scheduler, advance)
+    typer.echo(f"wrote {manifest} ({n} samples)", err=True)
+    if sheet_png:
+        dataset_sheet(output, sheet_png)
+        typer.echo(f"wrote {sheet_png}", err=True)
 
 
 @mesh_app.command("from-photo")

@@ -3,6 +3,7 @@ sheet (figure 3.12), drawn with matplotlib."""
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -80,7 +81,7 @@ def contact_sheet(images: list[np.ndarray], labels: list[str], path: Path, colum
         ax.set_axis_off()
     for ax, image, label in zip(np.atleast_1d(axes).ravel(), images, labels):
         ax.imshow(image)
-        ax.set_title(label, fontsize=12)
+        ax.set_title(textwrap.fill(label, 24), fontsize=12 if len(label) <= 18 else 9)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=120)

@@ -37,6 +37,7 @@ SCLERA = (0.95, 0.94, 0.92, 1.0)
 IRIS = (0.28, 0.42, 0.52, 1.0)
 PUPIL = (0.03, 0.03, 0.03, 1.0)
 ARROW = (0.85, 0.05, 0.05, 1.0)
+KEY_LIGHT, FILL_LIGHT = 3.2, 1.3
 
 
 @dataclass(frozen=True)
@@ -175,11 +176,14 @@ class FaceRenderer:
         yaw = np.radians(CAMERAS[settings.camera])
         eye = centre + distance * np.array([-np.sin(yaw), 0.0, np.cos(yaw)])
         camera = pyrender.PerspectiveCamera(yfov=fov, aspectRatio=settings.width / settings.height, znear=1.0, zfar=10 * distance)
-        scene.add(camera, pose=_look_at(eye, centre))
-        scene.add(pyrender.DirectionalLight(color=(1.0, 0.97, 0.92), intensity=3.2),
-                  pose=_look_at(centre + np.array([-0.6, 0.7, 1.0]), centre))
-        scene.add(pyrender.DirectionalLight(color=(0.85, 0.9, 1.0), intensity=1.3),
-                  pose=_look_at(centre + np.array([0.9, -0.1, 0.6]), centre))
+        self._centre, self._distance, self._yaw = centre, distance, yaw
+        self._camera = scene.add(camera, pose=_look_at(eye, centre))
+        self._lights = [
+            scene.add(pyrender.DirectionalLight(color=(1.0, 0.97, 0.92), intensity=KEY_LIGHT),
+                      pose=_look_at(centre + np.array([-0.6, 0.7, 1.0]), centre)),
+            scene.add(pyrender.DirectionalLight(color=(0.85, 0.9, 1.0), intensity=FILL_LIGHT),
+                      pose=_look_at(centre + np.array([0.9, -0.1, 0.6]), centre)),
+        ]
         self._scene = scene
         try:
             self._renderer = pyrender.OffscreenRenderer(settings.width, settings.height)
@@ -212,6 +216,15 @@ class FaceRenderer:
             cavity.apply_translation(points.mean(axis=0) - np.array([0.0, 0.0, 1.1]))
             material = pyrender.MetallicRoughnessMaterial(baseColorFactor=MOUTH, metallicFactor=0.0, roughnessFactor=1.0)
             scene.add(pyrender.Mesh.from_trimesh(cavity, material=material, smooth=True))
+
+    def view(self, yaw: float = 0.0, pitch: float = 0.0, light: float = 1.0) -> None:
+        """Turn the camera about the face by yaw and pitch (degrees, added to the preset)
+        and scale the lights' intensity: the jitter of a dataset."""
+        yaw, pitch = self._yaw + np.radians(yaw), np.radians(pitch)
+        direction = np.array([-np.sin(yaw) * np.cos(pitch), np.sin(pitch), np.cos(yaw) * np.cos(pitch)])
+        self._scene.set_pose(self._camera, _look_at(self._centre + self._distance * direction, self._centre))
+        for node, base in zip(self._lights, (KEY_LIGHT, FILL_LIGHT)):
+            node.light.intensity = base * light
 
     def _upload(self, primitive, data: np.ndarray) -> None:
         from OpenGL import GL

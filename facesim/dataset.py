@@ -1,0 +1,295 @@
+"""Datasets of labelled expressions for training and testing recognisers: many faces,
+each simulated and rendered to a PNG with the exact muscle activations and action units
+that made it.
+
+The distribution (``sample``), drawn per sample from ``numpy.random.default_rng([seed,
+index])``, so that a sample depends on the seed and its index only, never on the executor,
+the number of workers or the order they finish in:
+
+- with probability 1/2, one of the six basic expressions (happy, sad, angry, fear,
+  disgust, surprise), uniformly, at an intensity uniform in [0.5, 1];
+- otherwise one to three FACS action units, uniformly among those this face's muscles
+  can show (never two that exclude each other), each at an intensity uniform in [0.3, 1];
+- with ``jitter``: the camera turned by a yaw uniform in [-15, 15] and a pitch in [-8, 8]
+  degrees, and the lights scaled by a factor uniform in [0.8, 1.2].
+
+Each sample is simulated for 20 frames (the activations easing in over 10) and its last
+frame rendered. It is written atomically as ``images/<id>.png`` and ``labels/<id>.json``
+(activations, AUs, the expression, the render settings and the image's SHA-256), the
+label last (a draw whose simulation fails is labelled with the failure and no image): a sample whose label exists is finished, so a second run skips it and a worker
+that dies loses only the sample it was drawing. The manifest (Parquet where pyarrow is
+installed, CSV otherwise) is rebuilt from the labels on disk at the end of every run.
+
+Executors: ``local`` (processes over the cores) and ``dask`` (``dask.distributed``: a
+LocalCluster, or an existing cluster at ``--scheduler``). Every worker process keeps one
+renderer for all its samples.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError, SimulationError
+from .writers import atomic_path
+
+BASIC = ("happy", "sad", "angry", "fear", "disgust", "surprise")
+FRAMES, ONSET = 20, 10
+
+
+@dataclass(frozen=True)
+class DatasetSettings:
+    seed: int
+    width: int = 256
+    height: int = 256
+    jitter: bool = False
+    backend: str = "auto"
+
+
+def sample(seed: int, index: int, available_aus: list[str]) -> dict:
+    """The draw of one sample: which expression or action units, and the view."""
+    from .timeline import EXCLUSION
+
+    rng = np.random.default_rng([seed, index])
+    draw: dict = {"expression": None, "intensity": None, "aus": {}}
+    if rng.random() < 0.5:
+        draw["expression"] = BASIC[rng.integers(len(BASIC))]
+        draw["intensity"] = round(float(rng.uniform(0.5, 1.0)), 4)
+    else:
+        chosen: list[str] = []
+        for au in rng.permutation(available_aus)[: rng.integers(1, 4)]:
+            if not any({au, other} == set(pair) for pair in EXCLUSION for other in chosen):
+                chosen.append(str(au))
+        draw["aus"] = {au: round(float(rng.uniform(0.3, 1.0)), 4) for au in sorted(chosen)}
+    draw["yaw"], draw["pitch"], draw["light"] = rng.uniform(-15, 15), rng.uniform(-8, 8), rng.uniform(0.8, 1.2)
+    return draw
+
+
+def available_action_units(muscle_names) -> list[str]:
+    from .timeline import ACTION_UNITS, au_muscles
+
+    out = []
+    for au in ACTION_UNITS:
+        try:
+            au_muscles(au, muscle_names)
+            out.append(au)
+        except ValueError:
+            pass
+    return out
+
+
+_renderers: dict = {}
+
+
+def _renderer(rest, faces, settings: DatasetSettings):
+    from .render import FaceRenderer, RenderSettings
+
+    key = (settings.width, settings.height, settings.backend)
+    if key not in _renderers:
+        _renderers[key] = FaceRenderer(rest, faces, RenderSettings(settings.width, settings.height), settings.backend)
+    return _renderers[key]
+
+
+def sample_id(index: int) -> str:
+    return f"{index:07d}"
+
+
+def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
+    """Draw, simulate, render and write sample ``index``; returns its id. Skips a
+    finished sample."""
+    import imageio.v3 as iio
+
+    from .simulate import model_for, simulate
+    from .spec import Spec
+
+    root = Path(directory)
+    sid = sample_id(index)
+    label_path = root / "labels" / f"{sid}.json"
+    if label_path.exists():
+        return sid
+    probe = Spec(frames=FRAMES, onset=ONSET)
+    draw = sample(settings.seed, index, available_action_units(model_for(probe).muscles.names))
+    if draw["expression"]:
+        spec = Spec(frames=FRAMES, onset=ONSET, expressions={draw["expression"]: draw["intensity"]})
+    else:
+        spec = Spec(frames=FRAMES, onset=ONSET, aus=draw["aus"])
+    label = {"id": sid, "index": index, "seed": settings.seed, "expression": draw["expression"],
+             "intensity": draw["intensity"], "aus": draw["aus"], "width": settings.width, "height": settings.height,
+             "frames": FRAMES, "dt": spec.dt}
+    try:
+        animation = simulate(spec)
+    except SimulationError as exc:  # recorded, not fatal: the same draw fails the same way anywhere
+        label.update(status=f"failed: {exc}", activations={}, yaw=0.0, pitch=0.0, light=1.0, image="", sha256="")
+        with atomic_path(label_path) as tmp:
+            tmp.write_text(json.dumps(label, sort_keys=True))
+        return sid
+    renderer = _renderer(animation.rest, animation.faces, settings)
+    yaw, pitch, light = (draw[k] if settings.jitter else v for k, v in (("yaw", 0.0), ("pitch", 0.0), ("light", 1.0)))
+    renderer.view(yaw, pitch, light)
+    image = renderer.render(animation.positions[-1])
+    buffer = io.BytesIO()
+    iio.imwrite(buffer, image, extension=".png")
+    png = buffer.getvalue()
+    with atomic_path(root / "images" / f"{sid}.png") as tmp:
+        tmp.write_bytes(png)
+    label.update(
+        status="ok",
+        activations={m: round(float(a), 6) for m, a in zip(animation.muscle_names, animation.activations[-1]) if a > 0},
+        yaw=round(float(yaw), 4), pitch=round(float(pitch), 4), light=round(float(light), 4),
+        image=f"images/{sid}.png", sha256=hashlib.sha256(png).hexdigest(),
+    )
+    with atomic_path(label_path) as tmp:
+        tmp.write_text(json.dumps(label, sort_keys=True))
+    return sid
+
+
+def _prepare(directory: Path, n: int, settings: DatasetSettings) -> list[int]:
+    """Create the layout, check a rerun matches the first run, list unfinished samples."""
+    (directory / "images").mkdir(parents=True, exist_ok=True)
+    (directory / "labels").mkdir(exist_ok=True)
+    for stale in [*directory.glob("images/.*.partial-*"), *directory.glob("labels/.*.partial-*")]:
+        stale.unlink()  # left by a worker that was killed mid-write
+    meta = directory / "dataset.json"
+    wanted = {k: v for k, v in asdict(settings).items() if k != "backend"}
+    if meta.exists():
+        previous = json.loads(meta.read_text())
+        if previous != wanted:
+            raise InputError(f"{directory}: holds a dataset made with other settings {previous}; use another directory")
+    else:
+        with atomic_path(meta) as tmp:
+            tmp.write_text(json.dumps(wanted, sort_keys=True))
+    return [i for i in range(n) if not (directory / "labels" / f"{sample_id(i)}.json").exists()]
+
+
+def _run_local(directory: Path, todo: list[int], settings: DatasetSettings, jobs: int, advance) -> None:
+    if jobs <= 1:
+        for i in todo:
+            make_sample(str(directory), i, settings)
+            advance()
+        return
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        for _ in pool.map(make_sample, [str(directory)] * len(todo), todo, [settings] * len(todo), chunksize=4):
+            advance()
+
+
+def dask_client(scheduler: str | None, jobs: int):
+    """A dask.distributed client: a LocalCluster of ``jobs`` single-threaded worker
+    processes, or the cluster at ``scheduler``."""
+    import logging
+
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:
+        raise InputError("--executor dask needs dask.distributed: pip install 'dask[distributed]'") from None
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise InputError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({type(exc).__name__})") from None
+    cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None)
+    client = Client(cluster)
+    client._facesim_cluster = cluster
+    return client
+
+
+def run_on_dask(client, function, argument_lists, on_result) -> None:
+    """Map ``function`` over the argument lists on a Dask client, calling ``on_result``
+    as each finishes; then close the client (and its LocalCluster, if it made one)."""
+    from dask.distributed import as_completed
+
+    cluster = getattr(client, "_facesim_cluster", None)
+    try:
+        futures = client.map(function, *argument_lists, pure=False)
+        for future in as_completed(futures):
+            on_result(future.result())
+        del futures
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def write_manifest(directory: Path) -> Path:
+    """The manifest, rebuilt from every label on disk, ordered by index."""
+    labels = sorted((json.loads(p.read_text()) for p in (directory / "labels").glob("*.json")), key=lambda r: r["index"])
+    rows = [{**r, "aus": json.dumps(r["aus"], sort_keys=True), "activations": json.dumps(r["activations"], sort_keys=True)}
+            for r in labels]
+    columns = ["id", "index", "seed", "status", "expression", "intensity", "aus", "activations", "yaw", "pitch", "light",
+               "width", "height", "frames", "dt", "image", "sha256"]
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        path = directory / "manifest.csv"
+        with atomic_path(path) as tmp, tmp.open("w", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=columns)
+            writer.writeheader()
+            writer.writerows({k: r[k] for k in columns} for r in rows)
+        return path
+    path = directory / "manifest.parquet"
+    with atomic_path(path) as tmp:
+        pq.write_table(pa.Table.from_pylist([{k: r[k] for k in columns} for r in rows]), tmp)
+    return path
+
+
+def read_manifest(path: Path) -> list[dict]:
+    if path.suffix == ".parquet":
+        import pyarrow.parquet as pq
+
+        return pq.read_table(path).to_pylist()
+    with path.open() as handle:
+        return list(csv.DictReader(handle))
+
+
+def build_dataset(directory: Path, n: int, settings: DatasetSettings, executor: str = "local", jobs: int = 2,
+                  scheduler: str | None = None, advance=None) -> Path:
+    """Make (or finish) a dataset of ``n`` samples; returns the manifest's path."""
+    if executor not in ("local", "dask"):
+        raise InputError(f"--executor: expected local or dask, got {executor!r}")
+    if jobs < 1:
+        raise InputError(f"--jobs: must be at least 1, got {jobs}")
+    if scheduler and executor != "dask":
+        raise InputError("--scheduler: only with --executor dask")
+    if n <= 0:
+        raise InputError(f"--n: the number of samples must be at least 1, got {n}")
+    client = dask_client(scheduler, jobs) if executor == "dask" else None  # fail before writing anything
+    try:
+        todo = _prepare(directory, n, settings)
+    except BaseException:
+        if client is not None:
+            client.close()
+        raise
+    advance = advance or (lambda n=1: None)
+    if client is not None:
+        run_on_dask(client, make_sample, ([str(directory)] * len(todo), todo, [settings] * len(todo)), lambda _: advance())
+    elif todo:
+        _run_local(directory, todo, settings, jobs, advance)
+    return write_manifest(directory)
+
+
+def dataset_sheet(directory: Path, output: Path, count: int = 12, columns: int = 4) -> None:
+    """The first ``count`` samples in a labelled grid."""
+    import imageio.v3 as iio
+
+    from .plots import contact_sheet
+
+    chosen = [r for r in read_manifest(next(directory.glob("manifest.*"))) if r["status"] == "ok"][:count]
+    if not chosen:
+        raise InputError(f"{directory}: no finished samples to show")
+
+    def label(r):
+        if r["expression"]:
+            return f"{r['expression']} {float(r['intensity']):.2f}"
+        aus = json.loads(r["aus"]) if isinstance(r["aus"], str) else r["aus"]
+        return ", ".join(f"{au} {v:.1f}" for au, v in aus.items())
+
+    contact_sheet([iio.imread(directory / r["image"]) for r in chosen], [label(r) for r in chosen], output, columns)

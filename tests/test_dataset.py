@@ -1,0 +1,93 @@
+"""Datasets: the same samples on any executor, resumable after a crash, clear errors."""
+
+import csv
+import hashlib
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+pytest.importorskip("dask.distributed")
+
+from facesim.dataset import DatasetSettings, build_dataset, read_manifest, sample  # noqa: E402
+from facesim.errors import InputError  # noqa: E402
+
+SETTINGS = DatasetSettings(seed=7, width=64, height=64, jitter=True)
+
+
+def rows(directory):
+    return read_manifest(next(directory.glob("manifest.*")))
+
+
+def check_complete(directory, n):
+    manifest = rows(directory)
+    assert [int(r["index"]) for r in manifest] == list(range(n))  # no duplicate, none missing
+    for r in manifest:
+        if r["status"] == "ok":
+            assert hashlib.sha256((directory / r["image"]).read_bytes()).hexdigest() == r["sha256"]
+    assert not list(directory.rglob(".*partial*"))
+    return manifest
+
+
+def test_the_draw_depends_on_seed_and_index_only():
+    aus = ["AU1", "AU2", "AU12", "AU14", "AU15", "AU20"]
+    assert sample(7, 3, aus) == sample(7, 3, aus)
+    assert sample(7, 3, aus) != sample(8, 3, aus)
+    draws = [sample(7, i, aus) for i in range(200)]
+    assert 60 < sum(d["expression"] is not None for d in draws) < 140
+    assert not any({"AU14", "AU20"} <= set(d["aus"]) for d in draws)
+
+
+def test_dask_local_cluster_gives_the_same_manifest_as_the_local_executor(tmp_path):
+    local = build_dataset(tmp_path / "local", 6, SETTINGS, executor="local", jobs=1)
+    dask = build_dataset(tmp_path / "dask", 6, SETTINGS, executor="dask", jobs=2)
+    a, b = check_complete(local.parent, 6), check_complete(dask.parent, 6)
+    assert [(r["id"], r["sha256"]) for r in a] == [(r["id"], r["sha256"]) for r in b]
+    assert len({r["sha256"] for r in a}) == 6  # six different images
+    assert {"expression", "aus", "activations", "yaw", "light", "sha256"} <= set(a[0])
+
+
+def test_an_interrupted_run_completes_with_nothing_duplicated_or_missing(tmp_path):
+    directory = tmp_path / "ds"
+    command = [sys.executable, "-m", "facesim", "dataset", "--n", "10", "--seed", "7", "--size", "64x64", "--jitter",
+               "-o", str(directory), "--jobs", "2"]
+    process = subprocess.Popen(command, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.time() + 120
+    while len(list(directory.glob("labels/*.json"))) < 3 and time.time() < deadline:
+        time.sleep(0.05)
+    import os
+
+    os.killpg(process.pid, signal.SIGKILL)  # the whole run dies, workers included
+    process.wait()
+    finished = len(list(directory.glob("labels/*.json")))
+    assert 3 <= finished < 10
+    subprocess.run(command, check=True, capture_output=True)
+    resumed = check_complete(directory, 10)
+    fresh = build_dataset(tmp_path / "fresh", 10, SETTINGS, jobs=2)
+    assert [r["sha256"] for r in resumed] == [r["sha256"] for r in rows(fresh.parent)]
+
+
+def test_a_second_run_skips_finished_samples(tmp_path):
+    build_dataset(tmp_path, 3, SETTINGS, jobs=1)
+    stamps = {p: p.stat().st_mtime_ns for p in tmp_path.glob("images/*.png")}
+    build_dataset(tmp_path, 4, SETTINGS, jobs=1)
+    assert all(p.stat().st_mtime_ns == t for p, t in stamps.items())
+    check_complete(tmp_path, 4)
+    with pytest.raises(InputError, match="made with other settings"):
+        build_dataset(tmp_path, 4, DatasetSettings(seed=8, width=64, height=64, jitter=True), jobs=1)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--n", "0"], "--n: the number of samples must be at least 1, got 0"),
+    (["--n", "-3"], "--n: the number of samples must be at least 1"),
+    (["--n", "2", "--executor", "dask", "--scheduler", "tcp://127.0.0.1:9"], "cannot reach the Dask scheduler"),
+    (["--n", "2", "--executor", "spark"], "--executor: expected local or dask"),
+])
+def test_bad_arguments_are_one_line(tmp_path, args, message):
+    result = subprocess.run([sys.executable, "-m", "facesim", "dataset", "-o", str(tmp_path / "ds"), *args],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [f"facesim: error: {result.stderr.strip().split('error: ', 1)[1]}"]
+    assert message in result.stderr and not (tmp_path / "ds").exists()
