@@ -30,10 +30,3 @@ MIDLINE_FRACTION = 0.02
 #: A muscle given as a 3D point is snapped to the nearest vertex; farther than this
 #: fraction of the face's size (bounding-box diagonal) from every vertex is an error.
 SNAP_FRACTION = 0.03
-
-#: The skin area one vertex carries on the default face (276 cm² over 468 vertices). The
-#: material's mass, damping and tissue stiffness and the muscles' forces are given per
-#: such vertex; a mesh whose vertices carry less skin (a finer mesh) gets proportionally
-#: less of each per vertex, so the same files drive faces of any resolution. Springs need
-#: no scaling: a triangulated spring sheet has the same stiffness at any resolution.
-REFERENCE_VERTEX_AREA = 0.59

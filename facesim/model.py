@@ -8,12 +8,8 @@ pinned vertices, neighbour and one-ring lists in compressed rows, and the muscle
 geometry in the frame they act in (the 2D projection of eq. 3.21, or 3D when the
 projection is switched off). Per-step state (positions, velocities) lives elsewhere.
 
-Nothing is tuned to one mesh. The 2D projection needs the head's vertical axis and a
-radius to turn the angle u into a length: both come from a cylinder fitted to the mesh.
-Muscle falloff radii are multiples of each muscle's length. Mass, damping, tissue
-stiffness and muscle forces are per vertex of the default face and scale with the skin
-area a vertex carries (``config.REFERENCE_VERTEX_AREA``); rest lengths and altitudes are
-the mesh's own.
+The 2D projection needs the head's vertical axis and a radius to turn the angle u into a
+length: both come from a cylinder fitted to the mesh, so no face needs them by hand.
 """
 
 from __future__ import annotations
@@ -23,7 +19,6 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import Field
 
-from .config import REFERENCE_VERTEX_AREA
 from .mesh import FaceMesh, csr_from_pairs
 from .muscles import MuscleSet
 from .schema import Strict
@@ -76,7 +71,6 @@ class Model:
     material: Material
     muscles: MuscleSet
     scale: float  # bounding-box diagonal of the face, cm
-    vertex_share: float  # skin area per vertex relative to the default face (config.REFERENCE_VERTEX_AREA)
 
     @property
     def vertex_count(self) -> int:
@@ -95,22 +89,9 @@ class Model:
             self.repulsion_vertex, self.repulsion_edge, self.repulsion_rest_distance, self.muscle_origin,
             self.muscle_insertion_point, self.muscle_insertion, self.muscle_cos_zone, self.muscle_r,
             self.muscle_r_max, self.muscle_force, self.axis_x, self.axis_z, self.radius, self.rest_position,
-            self.particle_mass, self.particle_damping, m.stiffness, m.nonlinearity, m.repulsion_nonlinearity,
-            self.particle_tissue, m.edge_repulsion, m.uv_projection,
+            m.mass, m.damping, m.stiffness, m.nonlinearity, m.repulsion_nonlinearity, m.tissue,
+            m.edge_repulsion, m.uv_projection,
         )
-
-    @property
-    def particle_mass(self) -> float:
-        """m of one vertex: the material's mass for the skin area this mesh's vertices carry."""
-        return self.material.mass * self.vertex_share
-
-    @property
-    def particle_damping(self) -> float:
-        return self.material.damping * self.vertex_share
-
-    @property
-    def particle_tissue(self) -> float:
-        return self.material.tissue * self.vertex_share
 
 
 def project_uv(points: np.ndarray, axis_x: float, axis_z: float, radius: float) -> np.ndarray:
@@ -144,7 +125,6 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
     insertion = muscle_frame[muscles.insertion]
     length = np.linalg.norm(insertion - origin, axis=1)
 
-    vertex_share = mesh.face_areas.sum() / n / REFERENCE_VERTEX_AREA
     start, index = mesh.neighbours
     arrays = dict(
         rest_position=x,
@@ -168,12 +148,11 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         muscle_cos_zone=np.cos(muscles.zone),
         muscle_r=muscles.falloff[:, 0] * length,
         muscle_r_max=muscles.falloff[:, 1] * length,
-        muscle_force=muscles.force * vertex_share,
+        muscle_force=muscles.force,
     )
     return Model(
         **{key: _frozen(value) for key, value in arrays.items()},
         axis_x=axis_x, axis_z=axis_z, radius=radius, material=material, muscles=muscles, scale=mesh.scale,
-        vertex_share=float(vertex_share),
     )
 
 

@@ -93,7 +93,7 @@ def run(
     inverted = np.zeros(frames, dtype=np.int64)
     smallest = np.zeros(frames)
     frame_speed = RUNAWAY_FRACTION * model.scale / dt
-    energy_limit = 0.5 * model.particle_mass * n * frame_speed**2
+    energy_limit = 0.5 * model.material.mass * n * frame_speed**2
     status, frame, element = kernels._simulate(
         *model.kernel_arrays(), np.ascontiguousarray(activations, dtype=np.float64), float(dt),
         int(model.material.substeps), energy_limit, stop_on_inversion,

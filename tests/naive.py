@@ -137,16 +137,15 @@ def step(model, x, v, activation, h):
     xp = np.where(free[:, None], x + h * v, x)
     stiff, pull = spring_terms(x, xp, model.spring_indices, model.spring_rest_length, mat.stiffness, mat.nonlinearity)
     if mat.tissue > 0:
-        s, p = tissue_terms(x, model.rest_position, model.particle_tissue)
+        s, p = tissue_terms(x, model.rest_position, mat.tissue)
         stiff, pull = stiff + s, pull + p
     if mat.edge_repulsion:
         s, p = repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance,
                                mat.stiffness, mat.repulsion_nonlinearity)
         stiff, pull = stiff + s, pull + p
     force = muscle_forces(model, xp, activation)
-    m, c = model.particle_mass, model.particle_damping
-    denominator = np.maximum(m + h * c - h * h * stiff, m)
-    v_new = (m * v + h * force + h * pull) / denominator[:, None]
+    denominator = np.maximum(mat.mass + h * mat.damping - h * h * stiff, mat.mass)
+    v_new = (mat.mass * v + h * force + h * pull) / denominator[:, None]
     v_new[~free] = 0
     return x + h * v_new, v_new
 
