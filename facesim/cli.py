@@ -18,7 +18,7 @@ from .errors import FacesimError, InputError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
                   help="Anatomy-based facial expression animation: simulate a muscle-driven face and render it offscreen.")
-mesh_app = typer.Typer(no_args_is_help=True, help="Face meshes: build one from a photo.")
+mesh_app = typer.Typer(no_args_is_help=True, help="Face meshes: build one from a photo, check one.")
 app.add_typer(mesh_app, name="mesh")
 
 
@@ -317,6 +317,33 @@ def dataset(
     if sheet_png:
         dataset_sheet(output, sheet_png)
         typer.echo(f"wrote {sheet_png}", err=True)
+
+
+@mesh_app.command("info")
+@handled
+def mesh_info(mesh: Path = typer.Argument(..., help="a mesh file (OBJ, PLY, GLB, ...)")):
+    """Vertices, triangles, openings, scale and orientation of a mesh, which muscle file
+    fits it, and what is wrong with it. Exit code 1 when something is."""
+    from .config import DEFAULT_MESH, DEFAULT_MUSCLES
+    from .mesh import diagnose, load_mesh
+
+    face = load_mesh(mesh)
+    default = load_mesh(DEFAULT_MESH)
+    v = face.vertices
+    typer.echo(f"{mesh}: {face.vertex_count} vertices, {len(face.faces)} triangles, "
+               f"{face.connected_components()} piece(s)")
+    typer.echo(f"boundary loops: {[len(loop) for loop in face.boundary_loops] or 'none'}")
+    extent = np.ptp(v, axis=0)
+    typer.echo(f"size: {extent[0]:.2f} x {extent[1]:.2f} x {extent[2]:.2f} (x, y, z)")
+    same_topology = face.vertex_count == default.vertex_count and np.array_equal(face.edges, default.edges)
+    typer.echo("muscles: " + (f"{DEFAULT_MUSCLES} fits by landmark index (MediaPipe topology)" if same_topology else
+                              "another topology: give muscles as 3D points in the face frame, snapped to its vertices"))
+    problems = diagnose(face)
+    for problem in problems:
+        typer.echo(f"problem: {problem}")
+    if problems:
+        raise typer.Exit(1)
+    typer.echo("ok: usable as a facesim face")
 
 
 @mesh_app.command("from-photo")

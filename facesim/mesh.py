@@ -159,6 +159,30 @@ def mirror_mismatched_faces(faces: np.ndarray, mapping: np.ndarray) -> np.ndarra
     return np.array([i for i, t in enumerate(mapping[faces].tolist()) if tuple(sorted(t)) not in triangles], dtype=np.int64)
 
 
+def diagnose(mesh: FaceMesh) -> list[str]:
+    """What stops a mesh from being a facesim face: each problem as one sentence."""
+    problems = []
+    counts = mesh.edge_face_count
+    if (counts > 2).any():
+        problems.append(f"{int((counts > 2).sum())} non-manifold edges (shared by more than two triangles)")
+    directed = mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    _, repeats = np.unique(directed, axis=0, return_counts=True)
+    if (repeats > 1).any():
+        problems.append(f"{int((repeats > 1).sum())} edges run the same way in both their triangles: "
+                        "some triangles are flipped against their neighbours")
+    if not mesh.boundary_loops:
+        problems.append("no boundary: a closed head; facesim animates an open face mask whose rim it pins")
+    if mesh.connected_components() > 1:
+        problems.append(f"{mesh.connected_components()} separate pieces; a face is one surface")
+    height = float(np.ptp(mesh.vertices[:, 1]))
+    if not 5.0 <= height <= 50.0:
+        problems.append(f"{height:g} units tall: expected centimetres (a face is about 15-20 cm); wrong units?")
+    normal = (triangle_normals(mesh.vertices, mesh.faces) * mesh.face_areas[:, None]).sum(axis=0)
+    if normal[2] <= 0:
+        problems.append("the triangles face away from +z: the face should look toward +z with +y up")
+    return problems
+
+
 def fit_vertical_axis(points: np.ndarray) -> tuple[float, float, float]:
     """Least-squares circle through the (x, z) of the points (Kåsa's fit): the head's
     vertical axis (cx, cz) and the radius R of the cylinder the face wraps around."""

@@ -127,3 +127,35 @@ def test_cli_from_photo_on_a_blank_image_is_one_line(tmp_path):
     assert result.returncode == 2
     assert result.stderr.strip().endswith("blank.png: no face found in the image")
     assert "Traceback" not in result.stderr and not (tmp_path / "m.obj").exists()
+
+
+def run_mesh_info(path):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "facesim", "mesh", "info", str(path)], capture_output=True, text=True)
+
+
+def test_mesh_info_on_the_default_face():
+    result = run_mesh_info(DEFAULT_MESH)
+    assert result.returncode == 0
+    assert "468 vertices, 852 triangles" in result.stdout and "[36, 20, 16, 16]" in result.stdout
+    assert "fits by landmark index" in result.stdout and "ok: usable" in result.stdout
+
+
+def test_mesh_info_names_what_is_wrong(tmp_path, mesh):
+    from facesim.mesh import FaceMesh, write_obj
+
+    cases = {
+        "mm.obj": (FaceMesh(mesh.vertices * 10, mesh.faces), "wrong units?"),
+        "flipped.obj": (FaceMesh(mesh.vertices, np.vstack([mesh.faces[:10, ::-1], mesh.faces[10:]])), "flipped"),
+        "back.obj": (FaceMesh(mesh.vertices * np.array([1.0, 1.0, -1.0]), mesh.faces), "face away from +z"),
+    }
+    for name, (broken, message) in cases.items():
+        write_obj(tmp_path / name, broken)
+        result = run_mesh_info(tmp_path / name)
+        assert result.returncode == 1 and message in result.stdout, name
+    tetra = tmp_path / "closed.obj"
+    tetra.write_text("v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n")
+    result = run_mesh_info(tetra)
+    assert result.returncode == 1 and "a closed head" in result.stdout and "3D points" in result.stdout
