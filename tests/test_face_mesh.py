@@ -149,7 +149,7 @@ def test_mesh_info_names_what_is_wrong(tmp_path, mesh):
     cases = {
         "mm.obj": (FaceMesh(mesh.vertices * 10, mesh.faces), "wrong units?"),
         "flipped.obj": (FaceMesh(mesh.vertices, np.vstack([mesh.faces[:10, ::-1], mesh.faces[10:]])), "flipped"),
-        "back.obj": (FaceMesh(mesh.vertices * np.array([1.0, 1.0, -1.0]), mesh.faces), "face away from +z"),
+        "back.obj": (FaceMesh(mesh.vertices * np.array([-1.0, 1.0, -1.0]), mesh.faces), "face away from +z"),  # turned round
     }
     for name, (broken, message) in cases.items():
         write_obj(tmp_path / name, broken)
