@@ -301,6 +301,7 @@ def dataset(
     jobs: int = typer.Option(2, "--jobs", help="worker processes (local, or the Dask LocalCluster)"),
     size: str = typer.Option("256x256", "--size", help="image size WxH"),
     jitter: bool = typer.Option(False, "--jitter", help="vary the camera and the lights per sample"),
+    clip: bool = typer.Option(False, "--clip", help="also write each sample's 20 frames as an MP4 clip"),
     backend: str = BACKEND,
     sheet_png: Optional[Path] = typer.Option(None, "--sheet", help="also draw the first 12 samples to this PNG"),
 ):
@@ -310,7 +311,7 @@ def dataset(
     from .render import parse_size
 
     width, height = parse_size(size)
-    settings = DatasetSettings(seed, width, height, jitter, backend)
+    settings = DatasetSettings(seed, width, height, jitter, backend, clip)
     with progress_bar(max(n, 0), "dataset") as advance:
         manifest = build_dataset(output, n, settings, executor, jobs, scheduler, advance)
     typer.echo(f"wrote {manifest} ({n} samples)", err=True)

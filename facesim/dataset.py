@@ -14,7 +14,7 @@ the number of workers or the order they finish in:
   degrees, and the lights scaled by a factor uniform in [0.8, 1.2].
 
 Each sample is simulated for 20 frames (the activations easing in over 10) and its last
-frame rendered. It is written atomically as ``images/<id>.png`` and ``labels/<id>.json``
+frame rendered (with ``clip``, every frame too, as ``clips/<id>.mp4``). It is written atomically as ``images/<id>.png`` and ``labels/<id>.json``
 (activations, AUs, the expression, the render settings and the image's SHA-256), the
 label last (a draw whose simulation fails is labelled with the failure and no image): a sample whose label exists is finished, so a second run skips it and a worker
 that dies loses only the sample it was drawing. The manifest (Parquet where pyarrow is
@@ -52,6 +52,7 @@ class DatasetSettings:
     height: int = 256
     jitter: bool = False
     backend: str = "auto"
+    clip: bool = False
 
 
 def sample(seed: int, index: int, available_aus: list[str]) -> dict:
@@ -127,14 +128,21 @@ def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
     try:
         animation = simulate(spec)
     except SimulationError as exc:  # recorded, not fatal: the same draw fails the same way anywhere
-        label.update(status=f"failed: {exc}", activations={}, yaw=0.0, pitch=0.0, light=1.0, image="", sha256="")
+        label.update(status=f"failed: {exc}", activations={}, yaw=0.0, pitch=0.0, light=1.0, image="", sha256="", clip="")
         with atomic_path(label_path) as tmp:
             tmp.write_text(json.dumps(label, sort_keys=True))
         return sid
     renderer = _renderer(animation.rest, animation.faces, settings)
     yaw, pitch, light = (draw[k] if settings.jitter else v for k, v in (("yaw", 0.0), ("pitch", 0.0), ("light", 1.0)))
     renderer.view(yaw, pitch, light)
-    image = renderer.render(animation.positions[-1])
+    if settings.clip:
+        from .output import write_frames
+
+        frames = np.stack([renderer.render(p) for p in animation.positions])
+        write_frames(frames, root / "clips" / f"{sid}.mp4", "mp4", animation.fps)
+        image = frames[-1]
+    else:
+        image = renderer.render(animation.positions[-1])
     buffer = io.BytesIO()
     iio.imwrite(buffer, image, extension=".png")
     png = buffer.getvalue()
@@ -145,6 +153,7 @@ def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
         activations={m: round(float(a), 6) for m, a in zip(animation.muscle_names, animation.activations[-1]) if a > 0},
         yaw=round(float(yaw), 4), pitch=round(float(pitch), 4), light=round(float(light), 4),
         image=f"images/{sid}.png", sha256=hashlib.sha256(png).hexdigest(),
+        clip=f"clips/{sid}.mp4" if settings.clip else "",
     )
     with atomic_path(label_path) as tmp:
         tmp.write_text(json.dumps(label, sort_keys=True))
@@ -155,7 +164,9 @@ def _prepare(directory: Path, n: int, settings: DatasetSettings) -> list[int]:
     """Create the layout, check a rerun matches the first run, list unfinished samples."""
     (directory / "images").mkdir(parents=True, exist_ok=True)
     (directory / "labels").mkdir(exist_ok=True)
-    for stale in [*directory.glob("images/.*.partial-*"), *directory.glob("labels/.*.partial-*")]:
+    if settings.clip:
+        (directory / "clips").mkdir(exist_ok=True)
+    for stale in directory.glob("*/.*.partial-*"):
         stale.unlink()  # left by a worker that was killed mid-write
     meta = directory / "dataset.json"
     wanted = {k: v for k, v in asdict(settings).items() if k != "backend"}
@@ -224,7 +235,7 @@ def write_manifest(directory: Path) -> Path:
     rows = [{**r, "aus": json.dumps(r["aus"], sort_keys=True), "activations": json.dumps(r["activations"], sort_keys=True)}
             for r in labels]
     columns = ["id", "index", "seed", "status", "expression", "intensity", "aus", "activations", "yaw", "pitch", "light",
-               "width", "height", "frames", "dt", "image", "sha256"]
+               "width", "height", "frames", "dt", "image", "sha256", "clip"]
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq

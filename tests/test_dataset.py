@@ -79,6 +79,19 @@ def test_a_second_run_skips_finished_samples(tmp_path):
         build_dataset(tmp_path, 4, DatasetSettings(seed=8, width=64, height=64, jitter=True), jobs=1)
 
 
+def test_clips_hold_every_frame_and_end_on_the_image(tmp_path):
+    import imageio.v3 as iio
+    import numpy as np
+
+    from test_cli import mp4_frames
+
+    build_dataset(tmp_path, 2, DatasetSettings(seed=7, width=64, height=64, clip=True), jobs=1)
+    for r in check_complete(tmp_path, 2):
+        frames = mp4_frames(tmp_path / r["clip"])
+        assert frames.shape == (20, 64, 64, 3)
+        assert np.abs(frames[-1].astype(int) - iio.imread(tmp_path / r["image"]).astype(int)).mean() < 3
+
+
 @pytest.mark.parametrize("args, message", [
     (["--n", "0"], "--n: the number of samples must be at least 1, got 0"),
     (["--n", "-3"], "--n: the number of samples must be at least 1"),
