@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, RenderError
+from .errors import InputError
 from .render import FaceRenderer, RenderSettings
 from .simulate import Animation, muscle_forces
 from .writers import atomic_path
@@ -209,5 +209,3 @@ def progress_bar(total: int, description: str, enabled: bool | None = None):
 
     return _Bar()
 
-
-__all__ = ["RenderError", "RenderReport", "check_output", "render_frames", "write_animation", "progress_bar"]

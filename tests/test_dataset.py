@@ -1,6 +1,5 @@
 """Datasets: the same samples on any executor, resumable after a crash, clear errors."""
 
-import csv
 import hashlib
 import signal
 import subprocess
