@@ -81,7 +81,7 @@ def contact_sheet(images: list[np.ndarray], labels: list[str], path: Path, colum
         ax.set_axis_off()
     for ax, image, label in zip(np.atleast_1d(axes).ravel(), images, labels):
         ax.imshow(image)
-        ax.set_title(textwrap.fill(label, 24), fontsize=12 if len(label) <= 18 else 9)
+        ax.set_title(textwrap.fill(label, 22), fontsize=12 if len(label) <= 15 else 9)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=120)
