@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import FacesimError, InputError
-from .render import FaceRenderer, RenderSettings
+from .render import RenderSettings, shared_renderer
 
 
 def collect_specs(inputs: list[Path]) -> list[Path]:
@@ -36,16 +36,6 @@ class BatchResult:
     error: str | None = None
 
 
-_renderers: dict = {}
-
-
-def _renderer_for(animation, settings, backend) -> FaceRenderer:
-    key = (animation.rest.tobytes(), animation.faces.tobytes(), settings)
-    if key not in _renderers:
-        _renderers[key] = FaceRenderer(animation.rest, animation.faces, settings, backend)
-    return _renderers[key]
-
-
 def render_one(spec_path: Path, output: Path, settings: RenderSettings, backend: str, force: bool,
                mesh: Path | None = None, muscles: Path | None = None) -> BatchResult:
     """Load, simulate, render and write one spec; errors become a result, not an exception."""
@@ -57,7 +47,7 @@ def render_one(spec_path: Path, output: Path, settings: RenderSettings, backend:
         spec = load_spec(spec_path).with_overrides(mesh=mesh, muscles=muscles)
         check_output(output, force, settings)
         animation = simulate(spec)
-        renderer = None if output_kind(output) == "npz" else _renderer_for(animation, settings, backend)
+        renderer = None if output_kind(output) == "npz" else shared_renderer(animation.rest, animation.faces, settings, backend)
         return BatchResult(spec_path, report=write_animation(animation, output, settings, backend=backend, renderer=renderer))
     except FacesimError as exc:
         return BatchResult(spec_path, error=str(exc))

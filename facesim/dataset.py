@@ -87,18 +87,6 @@ def available_action_units(muscle_names) -> list[str]:
     return out
 
 
-_renderers: dict = {}
-
-
-def _renderer(rest, faces, settings: DatasetSettings):
-    from .render import FaceRenderer, RenderSettings
-
-    key = (settings.width, settings.height, settings.backend)
-    if key not in _renderers:
-        _renderers[key] = FaceRenderer(rest, faces, RenderSettings(settings.width, settings.height), settings.backend)
-    return _renderers[key]
-
-
 def sample_id(index: int) -> str:
     return f"{index:07d}"
 
@@ -108,6 +96,7 @@ def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
     finished sample."""
     import imageio.v3 as iio
 
+    from .render import RenderSettings, shared_renderer
     from .simulate import model_for, simulate
     from .spec import Spec
 
@@ -132,7 +121,8 @@ def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
         with atomic_path(label_path) as tmp:
             tmp.write_text(json.dumps(label, sort_keys=True))
         return sid
-    renderer = _renderer(animation.rest, animation.faces, settings)
+    renderer = shared_renderer(animation.rest, animation.faces, RenderSettings(settings.width, settings.height),
+                               settings.backend)
     yaw, pitch, light = (draw[k] if settings.jitter else v for k, v in (("yaw", 0.0), ("pitch", 0.0), ("light", 1.0)))
     renderer.view(yaw, pitch, light)
     if settings.clip:

@@ -14,13 +14,10 @@ from .writers import atomic_path
 def muscle_regions(model) -> list[np.ndarray]:
     """Each muscle's region of influence at rest (the flood fill of section 3.3)."""
     from . import kernels
+    from .simulate import muscle_frame
 
     n = model.vertex_count
-    frame = np.empty_like(model.rest_position)
-    if model.material.uv_projection:
-        kernels._project_uv(model.rest_position, model.axis_x, model.axis_z, model.radius, frame)
-    else:
-        frame[:] = model.rest_position
+    frame = muscle_frame(model, model.rest_position)
     visited, stack, region, delta = np.zeros(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n)
     regions = []
     for m in range(model.muscle_count):

@@ -270,3 +270,15 @@ def probe(backend: str) -> str:
         return "ok" if image.std() > 0 else "renders blank frames"
     except Exception as exc:  # the probe reports every failure rather than raising
         return f"fails: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+
+
+_shared: dict = {}
+
+
+def shared_renderer(rest: np.ndarray, faces: np.ndarray, settings: RenderSettings, backend: str = "auto") -> FaceRenderer:
+    """One renderer per process for each face and settings, kept for every later call:
+    how batch and dataset workers reuse their context across many specs or samples."""
+    key = (rest.tobytes(), faces.tobytes(), settings, backend)
+    if key not in _shared:
+        _shared[key] = FaceRenderer(rest, faces, settings, backend)
+    return _shared[key]

@@ -132,19 +132,25 @@ def simulate(spec: Spec, stop_on_inversion: bool = True) -> Animation:
     )
 
 
+def muscle_frame(model: Model, positions: np.ndarray) -> np.ndarray:
+    """The points the muscles act in: the 2D projection (u, v, 0) of eq. 3.21, or the 3D
+    positions when the projection is switched off."""
+    x = np.ascontiguousarray(positions, dtype=np.float64)
+    if not model.material.uv_projection:
+        return x.copy()
+    frame = np.empty_like(x)
+    kernels._project_uv(x, model.axis_x, model.axis_z, model.radius, frame)
+    return frame
+
+
 def muscle_forces(model: Model, positions: np.ndarray, activation: np.ndarray) -> np.ndarray:
     """The muscle forces (eq. 3.1-3.25) acting on a face at ``positions`` (n, 3) under
     ``activation`` (M,): what ``--show-muscles`` draws, as the thesis's figure 3.10."""
     n = model.vertex_count
     x = np.ascontiguousarray(positions, dtype=np.float64)
-    frame = np.empty_like(x)
-    if model.material.uv_projection:
-        kernels._project_uv(x, model.axis_x, model.axis_z, model.radius, frame)
-    else:
-        frame[:] = x
     force = np.zeros_like(x)
     kernels._muscle_forces(
-        frame, x, np.ascontiguousarray(activation, dtype=np.float64), model.muscle_origin, model.muscle_insertion_point,
+        muscle_frame(model, x), x, np.ascontiguousarray(activation, dtype=np.float64), model.muscle_origin, model.muscle_insertion_point,
         model.muscle_insertion, model.muscle_cos_zone, model.muscle_r, model.muscle_r_max, model.muscle_force,
         model.pinned, model.neighbour_start, model.neighbour_index, model.ring_start, model.ring_a, model.ring_b,
         model.material.uv_projection, force, np.zeros(n, dtype=np.int64), 0, np.empty(n, dtype=np.int64),
