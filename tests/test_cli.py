@@ -234,8 +234,11 @@ def test_divergence_is_reported_with_its_frame_and_nothing_written(tmp_path):
 def test_ctrl_c_leaves_nothing_behind(tmp_path):
     spec = write_spec(tmp_path, frames=3000, activations={"zygomaticus_major_l": 0.5})
     out = tmp_path / "long.mp4"
+    # as from a terminal: a shell without job control (CI running us in the background)
+    # hands its children SIGINT ignored, and Python then never raises KeyboardInterrupt
     process = subprocess.Popen([sys.executable, "-m", "facesim", "render", str(spec), "-o", str(out), *SMALL],
-                               stderr=subprocess.PIPE, text=True)
+                               stderr=subprocess.PIPE, text=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     time.sleep(8)
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=60)
