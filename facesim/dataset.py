@@ -94,9 +94,6 @@ def sample_id(index: int) -> str:
 def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
     """Draw, simulate, render and write sample ``index``; returns its id. Skips a
     finished sample."""
-    import imageio.v3 as iio
-
-    from .render import RenderSettings, shared_renderer
     from .simulate import model_for, simulate
     from .spec import Spec
 
@@ -118,9 +115,19 @@ def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
         animation = simulate(spec)
     except SimulationError as exc:  # recorded, not fatal: the same draw fails the same way anywhere
         label.update(status=f"failed: {exc}", activations={}, yaw=0.0, pitch=0.0, light=1.0, image="", sha256="", clip="")
-        with atomic_path(label_path) as tmp:
-            tmp.write_text(json.dumps(label, sort_keys=True))
-        return sid
+    else:
+        label.update(_render_sample(root, sid, animation, draw, settings))
+    with atomic_path(label_path) as tmp:
+        tmp.write_text(json.dumps(label, sort_keys=True))
+    return sid
+
+
+def _render_sample(root: Path, sid: str, animation, draw: dict, settings: DatasetSettings) -> dict:
+    """Render a simulated sample, write its image (and clip); the label's fields for it."""
+    import imageio.v3 as iio
+
+    from .render import RenderSettings, shared_renderer
+
     renderer = shared_renderer(animation.rest, animation.faces, RenderSettings(settings.width, settings.height),
                                settings.backend)
     yaw, pitch, light = (draw[k] if settings.jitter else v for k, v in (("yaw", 0.0), ("pitch", 0.0), ("light", 1.0)))
@@ -138,16 +145,13 @@ def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
     png = buffer.getvalue()
     with atomic_path(root / "images" / f"{sid}.png") as tmp:
         tmp.write_bytes(png)
-    label.update(
+    return dict(
         status="ok",
         activations={m: round(float(a), 6) for m, a in zip(animation.muscle_names, animation.activations[-1]) if a > 0},
         yaw=round(float(yaw), 4), pitch=round(float(pitch), 4), light=round(float(light), 4),
         image=f"images/{sid}.png", sha256=hashlib.sha256(png).hexdigest(),
         clip=f"clips/{sid}.mp4" if settings.clip else "",
     )
-    with atomic_path(label_path) as tmp:
-        tmp.write_text(json.dumps(label, sort_keys=True))
-    return sid
 
 
 def _prepare(directory: Path, n: int, settings: DatasetSettings) -> list[int]:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .render import FaceRenderer, RenderSettings
+from .render import FaceRenderer, RenderSettings, shared_renderer
 from .simulate import Animation, muscle_forces
 from .writers import atomic_path
 
@@ -71,19 +71,10 @@ def arrows_for(animation: Animation) -> np.ndarray | None:
     ])
 
 
-# One renderer per worker process, built by the pool's initializer and reused for every
-# chunk of frames the process is given.
-_worker_renderer: FaceRenderer | None = None
-
-
-def _init_worker(rest, faces, settings, backend):
-    global _worker_renderer
-    _worker_renderer = FaceRenderer(rest, faces, settings, backend)
-
-
-def _render_chunk(positions, arrows):
-    return np.stack([_worker_renderer.render(p, None if arrows is None else a)
-                     for p, a in zip(positions, arrows if arrows is not None else [None] * len(positions))])
+def _render_chunk(rest, faces, settings, backend, positions, arrows):
+    """Frames rendered in a worker process, by the process's one shared renderer."""
+    renderer = shared_renderer(rest, faces, settings, backend)
+    return np.stack([renderer.render(p, None if arrows is None else arrows[k]) for k, p in enumerate(positions)])
 
 
 def render_frames(animation: Animation, settings: RenderSettings, backend: str = "auto", jobs: int = 1,
@@ -111,11 +102,10 @@ def render_frames(animation: Animation, settings: RenderSettings, backend: str =
                 renderer.close()
     bounds = np.linspace(0, frames, jobs * 2 + 1).astype(int)
     chunks = [(animation.positions[a:b], None if arrows is None else arrows[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(jobs, mp_context=context, initializer=_init_worker,
-                             initargs=(animation.rest, animation.faces, settings, backend)) as pool:
+    fixed = [(animation.rest, animation.faces, settings, backend)] * len(chunks)
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
         out = []
-        for (positions, _), images in zip(chunks, pool.map(_render_chunk, *zip(*chunks))):
+        for (positions, _), images in zip(chunks, pool.map(_render_chunk, *zip(*fixed), *zip(*chunks))):
             out.append(images)
             if progress:
                 progress(len(positions))
