@@ -95,9 +95,14 @@ class Model:
 
 
 def project_uv(points: np.ndarray, axis_x: float, axis_z: float, radius: float) -> np.ndarray:
-    """Eq. 3.21 with u as arc length on the fitted cylinder: (R atan2(x - cx, z - cz), y, 0)."""
-    u = radius * np.arctan2(points[:, 0] - axis_x, points[:, 2] - axis_z)
-    return np.column_stack([u, points[:, 1], np.zeros(len(points))])
+    """Eq. 3.21 with u as arc length on the fitted cylinder: (R atan2(x - cx, z - cz), y, 0),
+    by the same kernel the simulation steps with."""
+    from .kernels import _project_uv
+
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    frame = np.empty_like(points)
+    _project_uv(points, axis_x, axis_z, radius, frame)
+    return frame
 
 
 def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Material()) -> Model:

@@ -18,7 +18,7 @@ import numpy as np
 from . import kernels
 from .errors import SimulationError
 from .mesh import FaceMesh, load_mesh
-from .model import Material, Model, build_model
+from .model import Material, Model, build_model, project_uv
 from .muscles import MuscleSet, load_muscles
 from .spec import Spec, activation_table
 
@@ -135,12 +135,9 @@ def simulate(spec: Spec, stop_on_inversion: bool = True) -> Animation:
 def muscle_frame(model: Model, positions: np.ndarray) -> np.ndarray:
     """The points the muscles act in: the 2D projection (u, v, 0) of eq. 3.21, or the 3D
     positions when the projection is switched off."""
-    x = np.ascontiguousarray(positions, dtype=np.float64)
     if not model.material.uv_projection:
-        return x.copy()
-    frame = np.empty_like(x)
-    kernels._project_uv(x, model.axis_x, model.axis_z, model.radius, frame)
-    return frame
+        return np.array(positions, dtype=np.float64, order="C")
+    return project_uv(positions, model.axis_x, model.axis_z, model.radius)
 
 
 def muscle_forces(model: Model, positions: np.ndarray, activation: np.ndarray) -> np.ndarray:
