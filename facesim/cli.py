@@ -368,7 +368,3 @@ def apex_frame(animation) -> int:
     """The last frame at which the total activation is largest."""
     total = animation.activations.sum(axis=1)
     return int(len(total) - 1 - np.argmax(total[::-1]))
-
-
-def main():  # pragma: no cover - the console script
-    app()
