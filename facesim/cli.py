@@ -193,7 +193,7 @@ def info(mesh: Optional[Path] = MESH, muscles: Optional[Path] = MUSCLES):
     """The face mesh, its muscles, and which OpenGL backends work here."""
     from .config import DEFAULT_MESH, DEFAULT_MUSCLES
     from .mesh import load_mesh
-    from .muscles import load_muscles
+    from .muscles import SPHINCTER, load_muscles
     from .render import BACKENDS
 
     mesh_path = mesh or DEFAULT_MESH
@@ -203,7 +203,10 @@ def info(mesh: Optional[Path] = MESH, muscles: Optional[Path] = MUSCLES):
     typer.echo(f"mesh: {mesh_path}: {face.vertex_count} vertices, {len(face.faces)} triangles, "
                f"boundary loops {[len(l) for l in face.boundary_loops]}, size {face.scale:.1f} cm")
     typer.echo(f"projection (eq. 3.21): vertical axis at x={cx:.2f}, z={cz:.2f} cm, radius {radius:.2f} cm")
-    typer.echo(f"muscles: {muscles or DEFAULT_MUSCLES}: {muscle_set.count} muscles, {len(muscle_set.pinned)} pinned vertices")
+    sphincters = int((muscle_set.kind == SPHINCTER).sum())
+    typer.echo(f"muscles: {muscles or DEFAULT_MUSCLES}: {muscle_set.count} muscles ({muscle_set.count - sphincters} linear, "
+               f"{sphincters} sphincter), {len(muscle_set.pinned)} pinned vertices, "
+               f"controls: {', '.join(muscle_set.controls) or 'none'}")
     for backend in BACKENDS:
         result = subprocess.run([sys.executable, "-c", f"from facesim.render import probe; print(probe({backend!r}))"],
                                 capture_output=True, text=True, timeout=120)
@@ -226,19 +229,23 @@ def muscles_command(
     from .config import DEFAULT_MESH, DEFAULT_MUSCLES
     from .model import Material, build_model
     from .mesh import load_mesh
-    from .muscles import load_muscles
+    from .muscles import SPHINCTER, load_muscles
     from .plots import muscle_regions, plot_muscles
 
     face = load_mesh(mesh or DEFAULT_MESH)
     model = build_model(face, load_muscles(muscles or DEFAULT_MUSCLES, face), Material())
     regions = muscle_regions(model)
-    table = Table(title=f"{model.muscle_count} muscles")
-    for column in ("name", "kind", "attachment", "insertion", "zone (deg)", "falloff", "force", "region"):
-        table.add_column(column)
     m = model.muscles
-    for k, name in enumerate(m.names):
-        table.add_row(name, "linear", str(m.attachment[k]), str(m.insertion[k]), f"{np.degrees(m.zone[k]):.0f}",
-                      f"{m.falloff[k, 0]:g}-{m.falloff[k, 1]:g}", f"{m.force[k]:g}", f"{len(regions[k])} vertices")
+    table = Table(title=f"{model.muscle_count} muscles; controls: {', '.join(m.controls) or 'none'}")
+    for column in ("name", "kind", "attachment / centre", "insertion / ring", "zone (deg)", "falloff", "force", "region"):
+        table.add_column(column)
+    for k, name in enumerate(m.names[:m.count]):
+        centre = m.centre_index[m.centre_start[k]:m.centre_start[k + 1]]
+        if m.kind[k] == SPHINCTER:
+            ends = ("sphincter", "+".join(map(str, centre)), f"{len(m.ring[k])} points", "-")
+        else:
+            ends = ("linear", str(m.attachment[k]), str(m.insertion[k]), f"{np.degrees(m.zone[k]):.0f}")
+        table.add_row(name, *ends, f"{m.falloff[k, 0]:g}-{m.falloff[k, 1]:g}", f"{m.force[k]:g}", f"{len(regions[k])} vertices")
     Console(width=140).print(table)
     if plot:
         plot_muscles(model, plot)
@@ -278,12 +285,12 @@ def sheet(
         images.append(renderer.render(first.rest))
         for a in animations:
             same_mesh = a.rest.shape == first.rest.shape and (a.rest == first.rest).all()
-            strongest = a.positions[apex_frame(a)]
+            apex = apex_frame(a)
             if same_mesh:
-                images.append(renderer.render(strongest))
+                images.append(renderer.render(a.positions[apex], pose=a.pose_at(apex)))
             else:
                 with FaceRenderer(a.rest, a.faces, settings, backend) as own:
-                    images.append(own.render(strongest))
+                    images.append(own.render(a.positions[apex], pose=a.pose_at(apex)))
             labels.append(a.name.replace("_", " "))
     output.parent.mkdir(parents=True, exist_ok=True)
     contact_sheet(images, labels, output, columns)

@@ -3,9 +3,12 @@ written into arrays passed last; no Python objects. One kernel per physical term
 
 - ``_spring_terms``     non-linear springs, eq. 3.6 and the g of eq. 3.17
 - ``_repulsion_terms``  edge repulsion, eq. 3.7 and the h of eq. 3.17
-- ``_muscle_forces``    linear muscles, eq. 3.1-3.4, in the 2D projection of eq. 3.21,
-                        back-projected onto the mesh (eq. 3.22-3.25), over the region of
-                        influence found by the stack-based flood fill of section 3.3
+- ``_muscle_forces``    linear muscles, eq. 3.1-3.4, and sphincters (facesim.muscles), in
+                        the 2D projection of eq. 3.21, back-projected onto the mesh
+                        (eq. 3.22-3.25), over the region of influence found by the
+                        stack-based flood fill of section 3.3
+- ``_rig_targets``      where the jaw and eyelids (facesim.rig) take the skin, and
+  ``_muscle_geometry``  where the muscles' ends are as the bones move
 - ``_velocity_update``  the quasi-implicit per-vertex solve of eq. 3.19 (with the Δt on
                         the spring and repulsion terms that the printed eq. 3.20 drops),
                         viscous damping eq. 3.10, positions by eq. 3.16
@@ -31,6 +34,8 @@ from .config import LENGTH_EPS, NEGLIGIBLE_DELTA, NUMBA_OPTIONS
 
 #: Status codes returned by ``_simulate``.
 OK, NOT_FINITE, INVERTED, RUNAWAY = 0, 1, 2, 3
+#: Muscle kinds (facesim.muscles.LINEAR, SPHINCTER).
+LINEAR, SPHINCTER = 0, 1
 
 
 @njit(**NUMBA_OPTIONS)
@@ -74,15 +79,17 @@ def _spring_terms(x, xp, spring_indices, spring_rest_length, k0, gamma, stiff, p
 
 
 @njit(**NUMBA_OPTIONS)
-def _tissue_terms(x, rest_position, tissue, stiff, pull):
-    """Hypodermis springs: each vertex tied to its rest position with stiffness k_t, the
-    soft tissue that attaches skin to bone. Not in the thesis (tissue = 0 is its model);
-    a spring mesh has no bending stiffness, so under muscle pull it wrinkles and creeps
-    without ever settling, and these springs give every mode a restoring force."""
+def _tissue_terms(x, target, tissue, hold, stiff, pull):
+    """Hypodermis springs: each vertex tied to its target (its rest position, moved by the
+    jaw and eyelids) with stiffness k_t + hold_i, the soft tissue that attaches skin to
+    bone. Not in the thesis (tissue = 0 is its model); a spring mesh has no bending
+    stiffness, so under muscle pull it wrinkles and creeps without ever settling, and
+    these springs give every mode a restoring force. ``hold`` drives the lid contours."""
     for i in range(x.shape[0]):
-        stiff[i] -= tissue
+        k = tissue + hold[i]
+        stiff[i] -= k
         for d in range(3):
-            pull[i, d] -= tissue * (x[i, d] - rest_position[i, d])
+            pull[i, d] -= k * (x[i, d] - target[i, d])
 
 
 @njit(**NUMBA_OPTIONS)
@@ -141,9 +148,17 @@ def _project_uv(xp, axis_x, axis_z, radius, uv):
     """Eq. 3.21 with u scaled to arc length: u = R atan2(x - cx, z - cz), v = y (cm).
     Written as 3D points (u, v, 0) so the falloff code serves both frames."""
     for i in range(xp.shape[0]):
-        uv[i, 0] = radius * math.atan2(xp[i, 0] - axis_x, xp[i, 2] - axis_z)
-        uv[i, 1] = xp[i, 1]
-        uv[i, 2] = 0.0
+        _frame_point(xp, i, axis_x, axis_z, radius, True, uv[i])
+
+
+@njit(**NUMBA_OPTIONS)
+def _radial(dist, r, r_max):
+    """δ_R of eq. 3.3: rising from 0 at the origin to 1 at r, falling to 0 at r_max."""
+    if dist > r_max:
+        return 0.0
+    if dist <= r:
+        return math.cos(0.5 * math.pi * (r - dist) / r)
+    return math.cos(0.5 * math.pi * (dist - r) / (r_max - r))
 
 
 @njit(**NUMBA_OPTIONS)
@@ -162,12 +177,21 @@ def _falloff(ox, oy, oz, ix, iy, iz, px, py, pz, cos_zone, r, r_max):
     cos_beta = (oix * opx + oiy * opy + oiz * opz) / (length * dist)
     if cos_beta < cos_zone:
         return 0.0
-    angular = (cos_beta - cos_zone) / (1.0 - cos_zone)
-    if dist <= r:
-        radial = math.cos(0.5 * math.pi * (r - dist) / r)
-    else:
-        radial = math.cos(0.5 * math.pi * (dist - r) / (r_max - r))
-    return angular * radial
+    return (cos_beta - cos_zone) / (1.0 - cos_zone) * _radial(dist, r, r_max)
+
+
+@njit(**NUMBA_OPTIONS)
+def _delta(m, muscle_kind, muscle_axes, muscle_origin, muscle_insertion_point, muscle_cos_zone, muscle_r, muscle_r_max,
+           px, py, pz):
+    """δ of muscle m at point P: eq. 3.4 for a linear muscle; for a sphincter, δ_R of
+    eq. 3.3 in the elliptical radius ρ = |((u - u_c) / a, (v - v_c) / b)| (1 on its ring)."""
+    if muscle_kind[m] == SPHINCTER:
+        du = (px - muscle_origin[m, 0]) / muscle_axes[m, 0]
+        dv = (py - muscle_origin[m, 1]) / muscle_axes[m, 1]
+        return _radial(math.sqrt(du * du + dv * dv), muscle_r[m], muscle_r_max[m])
+    return _falloff(muscle_origin[m, 0], muscle_origin[m, 1], muscle_origin[m, 2],
+                    muscle_insertion_point[m, 0], muscle_insertion_point[m, 1], muscle_insertion_point[m, 2],
+                    px, py, pz, muscle_cos_zone[m], muscle_r[m], muscle_r_max[m])
 
 
 @njit(**NUMBA_OPTIONS)
@@ -230,8 +254,8 @@ def _back_project(i, fu, fv, uv, xp, neighbour_start, neighbour_index, ring_star
 
 @njit(**NUMBA_OPTIONS)
 def _region_of_influence(
-    m, frame, muscle_origin, muscle_insertion_point, muscle_insertion, muscle_cos_zone, muscle_r, muscle_r_max,
-    neighbour_start, neighbour_index, visited, stamp, stack, region, delta,
+    m, frame, muscle_kind, muscle_axes, muscle_origin, muscle_insertion_point, muscle_insertion, muscle_cos_zone,
+    muscle_r, muscle_r_max, neighbour_start, neighbour_index, visited, stamp, stack, region, delta,
 ):
     """The stack-based flood fill of section 3.3 for muscle m: start at the insertion,
     pop a vertex, evaluate its δ (eq. 3.4), and push its neighbours only when δ is not
@@ -244,9 +268,8 @@ def _region_of_influence(
     while top >= 0:
         i = stack[top]
         top -= 1
-        d = _falloff(muscle_origin[m, 0], muscle_origin[m, 1], muscle_origin[m, 2],
-                     muscle_insertion_point[m, 0], muscle_insertion_point[m, 1], muscle_insertion_point[m, 2],
-                     frame[i, 0], frame[i, 1], frame[i, 2], muscle_cos_zone[m], muscle_r[m], muscle_r_max[m])
+        d = _delta(m, muscle_kind, muscle_axes, muscle_origin, muscle_insertion_point, muscle_cos_zone, muscle_r,
+                   muscle_r_max, frame[i, 0], frame[i, 1], frame[i, 2])
         if d <= NEGLIGIBLE_DELTA:
             continue
         region[count] = i
@@ -263,11 +286,12 @@ def _region_of_influence(
 
 @njit(**NUMBA_OPTIONS)
 def _muscle_forces(
-    frame, xp, activation, muscle_origin, muscle_insertion_point, muscle_insertion, muscle_cos_zone,
-    muscle_r, muscle_r_max, muscle_force, pinned, neighbour_start, neighbour_index, ring_start, ring_a,
-    ring_b, uv_projection, force, visited, stamp, stack, region, delta,
+    frame, xp, activation, muscle_kind, muscle_axes, muscle_origin, muscle_insertion_point, muscle_insertion,
+    muscle_cos_zone, muscle_r, muscle_r_max, muscle_force, pinned, neighbour_start, neighbour_index, ring_start,
+    ring_a, ring_b, uv_projection, force, visited, stamp, stack, region, delta,
 ):
-    """Eq. 3.1 on every vertex of each active muscle's region of influence.
+    """Eq. 3.1 on every vertex of each active muscle's region of influence: a pull toward
+    the attachment O of a linear muscle, toward the centre of a sphincter.
 
     ``frame`` holds the points the muscles act in: the 2D projection (u, v, 0) of eq. 3.21
     when ``uv_projection``, the forces then back-projected onto the mesh, or the 3D
@@ -281,9 +305,9 @@ def _muscle_forces(
         if a_m == 0.0:
             continue
         stamp += 1
-        count = _region_of_influence(m, frame, muscle_origin, muscle_insertion_point, muscle_insertion,
-                                     muscle_cos_zone, muscle_r, muscle_r_max, neighbour_start, neighbour_index,
-                                     visited, stamp, stack, region, delta)
+        count = _region_of_influence(m, frame, muscle_kind, muscle_axes, muscle_origin, muscle_insertion_point,
+                                     muscle_insertion, muscle_cos_zone, muscle_r, muscle_r_max, neighbour_start,
+                                     neighbour_index, visited, stamp, stack, region, delta)
         for k in range(count):
             i = region[k]
             if pinned[i]:
@@ -302,6 +326,103 @@ def _muscle_forces(
             for d in range(3):
                 force[i, d] += f3[d]
     return stamp
+
+
+@njit(**NUMBA_OPTIONS)
+def _rotate(px, py, pz, hx, hy, hz, ax, ay, az, angle):
+    """Point P turned by ``angle`` about the axis through H with unit direction A
+    (Rodrigues' formula)."""
+    vx, vy, vz = px - hx, py - hy, pz - hz
+    c, s = math.cos(angle), math.sin(angle)
+    dot = (ax * vx + ay * vy + az * vz) * (1.0 - c)
+    return (hx + vx * c + (ay * vz - az * vy) * s + ax * dot,
+            hy + vy * c + (az * vx - ax * vz) * s + ay * dot,
+            hz + vz * c + (ax * vy - ay * vx) * s + az * dot)
+
+
+@njit(**NUMBA_OPTIONS)
+def _rig_targets(rest_position, controls, jaw_column, jaw_weight, jaw_hinge, jaw_axis, jaw_max, lid_column, lid_centre,
+                 lid_delta, drive_column, drive_weight, drive, target, hold):
+    """Where the jaw and eyelids (facesim.rig) take each vertex under the activations
+    ``controls`` (a row of the activation table): its rest position slid over the eyeball
+    by the lid closure c, in cylindrical coordinates about the eye's horizontal axis,
+    then turned about the jaw hinge by w θ. ``hold`` is the extra stiffness driving the
+    lips and lid contours, drive * min(1, 10 a) for the activation a of their control:
+    zero while the jaw and lids are at rest."""
+    theta = jaw_max * controls[jaw_column] if jaw_column >= 0 else 0.0
+    for i in range(rest_position.shape[0]):
+        px, py, pz = rest_position[i, 0], rest_position[i, 1], rest_position[i, 2]
+        hold[i] = drive * drive_weight[i] * min(1.0, 10.0 * controls[drive_column[i]]) if drive_column[i] >= 0 else 0.0
+        if lid_column[i] >= 0:
+            c = controls[lid_column[i]]
+            if c != 0.0:
+                dy = py - lid_centre[i, 1]
+                dz = pz - lid_centre[i, 2]
+                phi = math.atan2(dy, dz) + c * lid_delta[i, 1]
+                r = math.sqrt(dy * dy + dz * dz) + c * lid_delta[i, 2]
+                px += c * lid_delta[i, 0]
+                py = lid_centre[i, 1] + r * math.sin(phi)
+                pz = lid_centre[i, 2] + r * math.cos(phi)
+        if theta != 0.0 and jaw_weight[i] > 0.0:
+            px, py, pz = _rotate(px, py, pz, jaw_hinge[0], jaw_hinge[1], jaw_hinge[2],
+                                 jaw_axis[0], jaw_axis[1], jaw_axis[2], jaw_weight[i] * theta)
+        target[i, 0] = px
+        target[i, 1] = py
+        target[i, 2] = pz
+
+
+@njit(**NUMBA_OPTIONS)
+def _muscle_geometry(target, muscle_kind, muscle_insertion, centre_start, centre_index, axis_x, axis_z, radius,
+                     uv_projection, origin, insertion_point):
+    """The muscles' ends in the frame they act in (eq. 3.21's projection, or 3D), from
+    where the bones hold them: O is the mean of the muscle's centre vertices (a linear
+    muscle's attachment), I its insertion (a sphincter has none; I = O)."""
+    for m in range(muscle_kind.shape[0]):
+        for d in range(3):
+            origin[m, d] = 0.0
+        count = centre_start[m + 1] - centre_start[m]
+        for k in range(centre_start[m], centre_start[m + 1]):
+            _frame_point(target, centre_index[k], axis_x, axis_z, radius, uv_projection, insertion_point[m])
+            for d in range(3):
+                origin[m, d] += insertion_point[m, d] / count
+        if muscle_kind[m] == LINEAR:
+            _frame_point(target, muscle_insertion[m], axis_x, axis_z, radius, uv_projection, insertion_point[m])
+        else:
+            for d in range(3):
+                insertion_point[m, d] = origin[m, d]
+
+
+@njit(**NUMBA_OPTIONS)
+def _frame_point(x, i, axis_x, axis_z, radius, uv_projection, out):
+    """Vertex i in the muscles' frame: (R atan2(x - cx, z - cz), y, 0) of eq. 3.21, or 3D."""
+    if uv_projection:
+        out[0] = radius * math.atan2(x[i, 0] - axis_x, x[i, 2] - axis_z)
+        out[1] = x[i, 1]
+        out[2] = 0.0
+    else:
+        for d in range(3):
+            out[d] = x[i, d]
+
+
+@njit(**NUMBA_OPTIONS)
+def _contacts(x, v, contact_upper, contact_lower, contact_gap, pinned):
+    """Lips and lids do not pass through each other: each pair (upper, lower) is kept at
+    least its gap apart vertically, by moving both half the overlap and giving them their
+    mean vertical velocity (an inelastic contact; a single-layer mesh has no collisions)."""
+    for k in range(contact_upper.shape[0]):
+        u = contact_upper[k]
+        l = contact_lower[k]
+        overlap = contact_gap[k] - (x[u, 1] - x[l, 1])
+        if overlap <= 0.0:
+            continue
+        share_u = 0.0 if pinned[u] else (1.0 if pinned[l] else 0.5)
+        share_l = 0.0 if pinned[l] else 1.0 - share_u
+        x[u, 1] += share_u * overlap
+        x[l, 1] -= share_l * overlap
+        if v[u, 1] < v[l, 1]:
+            mean = 0.5 * (v[u, 1] + v[l, 1])
+            v[u, 1] = 0.0 if pinned[u] else mean
+            v[l, 1] = 0.0 if pinned[l] else mean
 
 
 @njit(**NUMBA_OPTIONS)
@@ -356,13 +477,17 @@ def _triangle_checks(x, faces, rest_normal, rest_area):
 def _simulate(
     faces, rest_normal, rest_area, pinned, neighbour_start, neighbour_index, ring_start, ring_a, ring_b,
     spring_indices, spring_rest_length, repulsion_vertex, repulsion_edge, repulsion_rest_distance,
-    muscle_origin, muscle_insertion_point, muscle_insertion, muscle_cos_zone, muscle_r, muscle_r_max, muscle_force,
-    axis_x, axis_z, radius, rest_position, mass, damping, k0, gamma, zeta, tissue, edge_repulsion, uv_projection,
+    muscle_kind, muscle_axes, muscle_insertion, muscle_centre_start, muscle_centre_index, muscle_cos_zone, muscle_r,
+    muscle_r_max, muscle_force, axis_x, axis_z, radius, rest_position,
+    jaw_column, jaw_weight, jaw_hinge, jaw_axis, jaw_max, lid_column, lid_centre, lid_delta, drive_column,
+    drive_weight, contact_upper, contact_lower, contact_gap, mass, damping, k0, gamma, zeta, tissue, drive, edge_repulsion, uv_projection,
     activations, dt, substeps, energy_limit, stop_on_inversion,
     x, v, positions, kinetic_energy, inverted, smallest_area,
 ):
     """Algorithm 3.4.1: ``substeps`` steps of Δt / substeps per frame, for every row of
-    ``activations`` (frames, muscles). x and v (n, 3) are the state, advanced in place.
+    ``activations`` (frames, muscles and controls). x and v (n, 3) are the state, advanced
+    in place. Within a frame the controls (jaw, eyelids) move linearly from the previous
+    frame's values, so the targets never jump.
 
     Writes positions (frames, n, 3) and per-frame diagnostics. Returns (status, frame,
     element): OK, or the first frame that is NOT_FINITE (element: a vertex), INVERTED
@@ -377,37 +502,58 @@ def _simulate(
     force = np.empty_like(x)
     pull = np.empty_like(x)
     stiff = np.empty(n)
+    target = rest_position.copy()
+    hold = np.zeros(n)
+    controls = np.zeros(activations.shape[1])
+    origin = np.empty((muscle_kind.shape[0], 3))
+    insertion_point = np.empty((muscle_kind.shape[0], 3))
+    _muscle_geometry(target, muscle_kind, muscle_insertion, muscle_centre_start, muscle_centre_index,
+                     axis_x, axis_z, radius, uv_projection, origin, insertion_point)
+    rigged = jaw_column >= 0 or lid_column.max() >= 0
     visited = np.zeros(n, dtype=np.int64)
     stack = np.empty(n, dtype=np.int64)
     region = np.empty(n, dtype=np.int64)
     delta = np.empty(n)
     stamp = 0
     for f in range(activations.shape[0]):
-        for _ in range(substeps):
+        for s in range(substeps):
+            if rigged:
+                blend = (s + 1.0) / substeps
+                for c in range(controls.shape[0]):
+                    previous = activations[f - 1, c] if f > 0 else 0.0
+                    controls[c] = previous + blend * (activations[f, c] - previous)
+                _rig_targets(rest_position, controls, jaw_column, jaw_weight, jaw_hinge, jaw_axis, jaw_max, lid_column,
+                             lid_centre, lid_delta, drive_column, drive_weight, drive, target, hold)
+                _muscle_geometry(target, muscle_kind, muscle_insertion, muscle_centre_start, muscle_centre_index,
+                                 axis_x, axis_z, radius, uv_projection, origin, insertion_point)
             for i in range(n):
                 for d in range(3):
-                    xp[i, d] = x[i, d] if pinned[i] else x[i, d] + h * v[i, d]  # eq. 3.14
+                    if pinned[i]:
+                        x[i, d] = target[i, d]  # the bone holds it
+                        xp[i, d] = x[i, d]
+                    else:
+                        xp[i, d] = x[i, d] + h * v[i, d]  # eq. 3.14
             stiff[:] = 0.0
             pull[:] = 0.0
             force[:] = 0.0
             _spring_terms(x, xp, spring_indices, spring_rest_length, k0, gamma, stiff, pull)
-            if tissue > 0.0:
-                _tissue_terms(x, rest_position, tissue, stiff, pull)
+            _tissue_terms(x, target, tissue, hold, stiff, pull)
             if edge_repulsion:
                 _repulsion_terms(x, xp, repulsion_vertex, repulsion_edge, repulsion_rest_distance, k0, zeta, stiff, pull)
             if uv_projection:
                 _project_uv(xp, axis_x, axis_z, radius, frame)
             else:
                 frame[:] = xp
-            stamp = _muscle_forces(frame, xp, activations[f], muscle_origin, muscle_insertion_point, muscle_insertion,
-                                   muscle_cos_zone, muscle_r, muscle_r_max, muscle_force, pinned, neighbour_start,
-                                   neighbour_index, ring_start, ring_a, ring_b, uv_projection, force, visited, stamp, stack,
-                                   region, delta)
+            stamp = _muscle_forces(frame, xp, activations[f], muscle_kind, muscle_axes, origin, insertion_point,
+                                   muscle_insertion, muscle_cos_zone, muscle_r, muscle_r_max, muscle_force, pinned,
+                                   neighbour_start, neighbour_index, ring_start, ring_a, ring_b, uv_projection, force,
+                                   visited, stamp, stack, region, delta)
             _velocity_update(x, v, force, stiff, pull, mass, damping, h, pinned, v_new)
             for i in range(n):
                 for d in range(3):
                     v[i, d] = v_new[i, d]
                     x[i, d] += h * v[i, d]  # eq. 3.16
+            _contacts(x, v, contact_upper, contact_lower, contact_gap, pinned)
         energy = 0.0
         for i in range(n):
             for d in range(3):

@@ -19,8 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import Field
 
+from .errors import InputError
 from .mesh import FaceMesh, csr_from_pairs
-from .muscles import MuscleSet
+from .muscles import SPHINCTER, MuscleSet
+from .rig import Rig, build_rig
 from .schema import Strict
 
 
@@ -33,6 +35,7 @@ class Material(Strict):
     repulsion_nonlinearity: float = Field(5.0, ge=0, description="edge-repulsion non-linearity ζ, eq. 3.7")
     damping: float = Field(40.0, ge=0, description="viscous damping c, eq. 3.10")
     tissue: float = Field(300.0, ge=0, description="hypodermis springs tying skin to bone (not in the thesis, where it is 0)")
+    drive: float = Field(20000.0, ge=0, description="stiffness driving the lips and lid contours to the targets of the jaw and eyelids (facesim.rig)")
     substeps: int = Field(4, ge=1, le=1000, description="integration steps per frame (each Δt / substeps)")
     edge_repulsion: bool = Field(True, description="edge repulsion (eq. 3.7); off reproduces the thesis's fig. 3.16")
     uv_projection: bool = Field(True, description="muscle forces in the 2D projection (eq. 3.21-3.25); off: in 3D")
@@ -58,9 +61,13 @@ class Model:
     repulsion_vertex: np.ndarray  # (r,)
     repulsion_edge: np.ndarray  # (r, 2)
     repulsion_rest_distance: np.ndarray  # (r,)
-    muscle_origin: np.ndarray  # (M, 3) attachment O at rest, in the muscle frame
+    muscle_kind: np.ndarray  # (M,) LINEAR or SPHINCTER
+    muscle_axes: np.ndarray  # (M, 2) a sphincter's semi-axes in the muscle frame (cm)
+    muscle_origin: np.ndarray  # (M, 3) attachment O (a sphincter's centre) at rest, in the muscle frame
     muscle_insertion_point: np.ndarray  # (M, 3) insertion I at rest, in the muscle frame
     muscle_insertion: np.ndarray  # (M,) vertex of I, where the flood fill starts
+    muscle_centre_start: np.ndarray  # (M+1,) the vertices whose mean is O, compressed rows
+    muscle_centre_index: np.ndarray
     muscle_cos_zone: np.ndarray  # (M,) cos α
     muscle_r: np.ndarray  # (M,) r of eq. 3.3 (cm)
     muscle_r_max: np.ndarray  # (M,) r_max of eq. 3.3 (cm)
@@ -70,6 +77,7 @@ class Model:
     radius: float
     material: Material
     muscles: MuscleSet
+    rig: Rig
     scale: float  # bounding-box diagonal of the face, cm
 
     @property
@@ -86,12 +94,18 @@ class Model:
         return (
             self.faces, self.rest_normal, self.rest_area, self.pinned, self.neighbour_start, self.neighbour_index,
             self.ring_start, self.ring_a, self.ring_b, self.spring_indices, self.spring_rest_length,
-            self.repulsion_vertex, self.repulsion_edge, self.repulsion_rest_distance, self.muscle_origin,
-            self.muscle_insertion_point, self.muscle_insertion, self.muscle_cos_zone, self.muscle_r,
-            self.muscle_r_max, self.muscle_force, self.axis_x, self.axis_z, self.radius, self.rest_position,
-            m.mass, m.damping, m.stiffness, m.nonlinearity, m.repulsion_nonlinearity, m.tissue,
+            self.repulsion_vertex, self.repulsion_edge, self.repulsion_rest_distance, self.muscle_kind,
+            self.muscle_axes, self.muscle_insertion, self.muscle_centre_start, self.muscle_centre_index,
+            self.muscle_cos_zone, self.muscle_r, self.muscle_r_max, self.muscle_force, self.axis_x, self.axis_z,
+            self.radius, self.rest_position, *self.rig.arrays(),
+            m.mass, m.damping, m.stiffness, m.nonlinearity, m.repulsion_nonlinearity, m.tissue, m.drive,
             m.edge_repulsion, m.uv_projection,
         )
+
+    def muscle_arrays(self) -> tuple:
+        """The muscle arrays in the order ``kernels._muscle_forces`` takes them (rest geometry)."""
+        return (self.muscle_kind, self.muscle_axes, self.muscle_origin, self.muscle_insertion_point, self.muscle_insertion,
+                self.muscle_cos_zone, self.muscle_r, self.muscle_r_max)
 
 
 def project_uv(points: np.ndarray, axis_x: float, axis_z: float, radius: float) -> np.ndarray:
@@ -125,10 +139,18 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
     pinned[muscles.pinned] = True
 
     axis_x, axis_z, radius = mesh.vertical_axis
+    from .kernels import _muscle_geometry
+
+    origin, insertion = np.empty((muscles.count, 3)), np.empty((muscles.count, 3))
+    _muscle_geometry(x, muscles.kind, muscles.insertion, muscles.centre_start, muscles.centre_index,
+                     axis_x, axis_z, radius, material.uv_projection, origin, insertion)
+    sphincter = muscles.kind == SPHINCTER
+    length = np.where(sphincter, 1.0, np.linalg.norm(insertion - origin, axis=1))  # a sphincter's falloff is in ring radii
     muscle_frame = project_uv(x, axis_x, axis_z, radius) if material.uv_projection else x
-    origin = muscle_frame[muscles.attachment]
-    insertion = muscle_frame[muscles.insertion]
-    length = np.linalg.norm(insertion - origin, axis=1)
+    axes = np.zeros((muscles.count, 2))
+    for m in np.flatnonzero(sphincter):
+        axes[m] = ellipse_axes(muscle_frame[muscles.ring[m], :2] - origin[m, :2],
+                               f"{muscles.source}: muscle {muscles.names[m]}: ring")
 
     start, index = mesh.neighbours
     arrays = dict(
@@ -147,9 +169,13 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         repulsion_vertex=repulsion_vertex,
         repulsion_edge=repulsion_edge,
         repulsion_rest_distance=altitude,
+        muscle_kind=muscles.kind,
+        muscle_axes=axes,
         muscle_origin=origin,
         muscle_insertion_point=insertion,
         muscle_insertion=muscles.insertion,
+        muscle_centre_start=muscles.centre_start,
+        muscle_centre_index=muscles.centre_index,
         muscle_cos_zone=np.cos(muscles.zone),
         muscle_r=muscles.falloff[:, 0] * length,
         muscle_r_max=muscles.falloff[:, 1] * length,
@@ -157,8 +183,19 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
     )
     return Model(
         **{key: _frozen(value) for key, value in arrays.items()},
-        axis_x=axis_x, axis_z=axis_z, radius=radius, material=material, muscles=muscles, scale=mesh.scale,
+        axis_x=axis_x, axis_z=axis_z, radius=radius, material=material, muscles=muscles, rig=build_rig(mesh, muscles),
+        scale=mesh.scale,
     )
+
+
+def ellipse_axes(points: np.ndarray, where: str) -> tuple[float, float]:
+    """Semi-axes (a, b) of the axis-aligned ellipse u²/a² + v²/b² = 1 closest to 2D points
+    around its centre (least squares in 1/a² and 1/b²): a sphincter's ring."""
+    design = points**2
+    (p, q), *_ = np.linalg.lstsq(design, np.ones(len(points)), rcond=None)
+    if p <= 0 or q <= 0:
+        raise InputError(f"{where}: does not surround its centre")
+    return 1 / np.sqrt(p), 1 / np.sqrt(q)
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:

@@ -4,12 +4,22 @@ and the resolved :class:`MuscleSet` of arrays the model is built from.
 A linear muscle (Waters; Zhang et al.) runs from its attachment O, on bone, to its
 insertion I, in the skin. Its region of influence is the sector of angle ``zone`` around
 O->I (eq. 3.2), with radial falloff out to ``r`` and ``r_max`` (eq. 3.3), both given as
-multiples of the muscle length |OI| so that one file fits faces of any size. Points are
-landmark indices or 3D points (cm) snapped to the nearest vertex, so a mesh of another
-topology can carry the same muscles.
+multiples of the muscle length |OI| so that one file fits faces of any size.
 
-Attachments are pinned (the single-layer face has no skull to hold them), and so is the
-outer rim of the mask: without it the mask drifts as a whole under the muscle pull.
+A sphincter muscle (Waters' elliptical model; not in the thesis) is a ring that contracts
+toward its centre: the orbicularis oris around the mouth, the orbicularis oculi around
+each eye. Its ellipse is fitted to the ring's points; a vertex at elliptical radius ρ
+(1 on the ring) is pulled toward the centre with the radial falloff of eq. 3.3 in ρ,
+rising from the centre to ``r`` and falling to zero at ``r_max`` (ring radii).
+
+The file also names the bone-driven parts of the face (facesim.rig): the jaw's hinge and
+the lips that do and do not follow it, and each eye's upper and lower lid contours. They
+are driven like muscles, by activations named ``jaw`` and ``eyelid_r`` / ``eyelid_l``.
+
+Points are landmark indices or 3D points (cm) snapped to the nearest vertex, so a mesh of
+another topology can carry the same file. Attachments are pinned (the single-layer face has
+no skull to hold them), and so is the outer rim of the mask: without it the mask drifts as
+a whole under the muscle pull.
 """
 
 from __future__ import annotations
@@ -17,7 +27,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal, Union
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
@@ -37,28 +47,79 @@ class MuscleDefaults(Strict):
     force: float = Field(30.0, gt=0, description="peak force f of eq. 3.1 at full activation")
 
 
-class MuscleEntry(Strict):
+def _snake_case(name: str) -> str:
+    if not NAME.match(name):
+        raise ValueError("must be snake_case (lower-case letters, digits, underscores)")
+    return name
+
+
+def _ordered(falloff):
+    if falloff is not None and not 0 < falloff[0] <= falloff[1]:
+        raise ValueError("must be [r, r_max] with 0 < r <= r_max")
+    return falloff
+
+
+class _Muscle(Strict):
     name: str
+    falloff: tuple[float, float] | None = None
+    force: float | None = Field(None, gt=0)
+
+    _names = field_validator("name")(_snake_case)
+    _falloff = field_validator("falloff")(_ordered)
+
+
+class MuscleEntry(_Muscle):
     kind: Literal["linear"]
     attachment: Point
     insertion: Point
     zone: float | None = Field(None, gt=0, le=180)
-    falloff: tuple[float, float] | None = None
-    force: float | None = Field(None, gt=0)
 
-    @field_validator("name")
-    @classmethod
-    def _snake_case(cls, name: str) -> str:
-        if not NAME.match(name):
-            raise ValueError("must be snake_case (lower-case letters, digits, underscores)")
-        return name
 
-    @field_validator("falloff")
-    @classmethod
-    def _ordered(cls, falloff):
-        if falloff is not None and not 0 < falloff[0] <= falloff[1]:
-            raise ValueError("must be [r, r_max] with 0 < r <= r_max")
-        return falloff
+class SphincterEntry(_Muscle):
+    """A ring muscle: ``centre`` is the mean of its points, ``ring`` the points the
+    ellipse is fitted to (``falloff`` in ring radii; default [1, 1.5])."""
+
+    kind: Literal["sphincter"]
+    centre: list[Point] = Field(..., min_length=1)
+    ring: list[Point] = Field(..., min_length=4)
+
+
+class Jaw(Strict):
+    """The mandible: a rotation about the hinge axis through two points (the
+    temporomandibular joints), ``max_angle`` degrees at activation 1. ``lower`` points
+    follow it fully, ``upper`` points stay with the skull; the rest of the face follows
+    with a weight interpolated smoothly between them (facesim.rig). The two lists pair
+    up, upper over lower: the lips' contacts."""
+
+    hinge: tuple[Point, Point]
+    lower: list[Point] = Field(..., min_length=1)
+    upper: list[Point] = Field(..., min_length=1)
+    max_angle: float = Field(20.0, gt=0, le=45)
+
+    @model_validator(mode="after")
+    def _paired(self):
+        if len(self.upper) != len(self.lower):
+            raise ValueError(f"upper ({len(self.upper)} points) and lower ({len(self.lower)}) must pair up")
+        return self
+
+
+class Eyelid(Strict):
+    """One eye's lids: the upper and lower contour points, paired from one eye corner to
+    the other. ``reach`` is how far around the opening the skin follows the lids, in eye
+    widths."""
+
+    name: str
+    upper: list[Point] = Field(..., min_length=1)
+    lower: list[Point] = Field(..., min_length=1)
+    reach: float = Field(0.45, gt=0, le=2)
+
+    _names = field_validator("name")(_snake_case)
+
+    @model_validator(mode="after")
+    def _paired(self):
+        if len(self.upper) != len(self.lower):
+            raise ValueError(f"upper ({len(self.upper)} points) and lower ({len(self.lower)}) must pair up")
+        return self
 
 
 class Pinned(Strict):
@@ -70,44 +131,86 @@ class MuscleFile(Strict):
     units: Literal["cm"] = "cm"
     defaults: MuscleDefaults = MuscleDefaults()
     pinned: Pinned = Pinned()
-    muscles: list[MuscleEntry]
+    muscles: list[Annotated[Union[MuscleEntry, SphincterEntry], Field(discriminator="kind")]]
+    jaw: Jaw | None = None
+    eyelids: list[Eyelid] = []
 
     @model_validator(mode="after")
     def _unique_names(self):
-        seen = set()
-        for m in self.muscles:
-            if m.name in seen:
-                raise ValueError(f"duplicate muscle name {m.name!r}")
-            seen.add(m.name)
+        seen = {"jaw"} if self.jaw else set()
+        for name in [m.name for m in self.muscles] + [e.name for e in self.eyelids]:
+            if name in seen:
+                raise ValueError(f"duplicate name {name!r}")
+            seen.add(name)
         return self
 
     @field_validator("defaults")
     @classmethod
     def _defaults_ordered(cls, d: MuscleDefaults) -> MuscleDefaults:
-        MuscleEntry._ordered(d.falloff)
+        _ordered(d.falloff)
         return d
+
+
+LINEAR, SPHINCTER = 0, 1
+
+
+@dataclass(frozen=True)
+class JawRig:
+    """The jaw resolved onto a mesh: hinge (2, 3) points in cm, lower/upper vertex indices,
+    max_angle in radians."""
+
+    hinge: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    max_angle: float
+
+
+@dataclass(frozen=True)
+class EyelidRig:
+    """One eye's lid contours resolved onto a mesh, paired corner to corner."""
+
+    name: str
+    upper: np.ndarray
+    lower: np.ndarray
+    reach: float
 
 
 @dataclass(frozen=True)
 class MuscleSet:
-    """Muscles resolved onto a mesh. Arrays are indexed by muscle.
+    """Muscles resolved onto a mesh. Per-muscle arrays are indexed by muscle (M of them).
 
-    attachment, insertion : (M,) int64 vertex indices; zone : (M,) radians;
-    falloff : (M, 2) r and r_max in muscle lengths; force : (M,); pinned : (p,) int64.
+    names : the activation columns, the M muscles then the controls (``jaw``, the eyelids);
+    kind : (M,) LINEAR or SPHINCTER; attachment : (M,) vertex of O, -1 for a sphincter;
+    insertion : (M,) vertex of I, for a sphincter the ring vertex its flood fill starts at;
+    centre_start, centre_index : the vertices whose mean is O (a linear muscle's
+    attachment, a sphincter's centre points), in compressed rows; ring : a sphincter's ring
+    vertices (empty for a linear muscle); zone : (M,) radians; falloff : (M, 2) r and r_max
+    in muscle lengths or ring radii; force : (M,); pinned : (p,) int64.
     """
 
     names: tuple[str, ...]
+    kind: np.ndarray
     attachment: np.ndarray
     insertion: np.ndarray
+    centre_start: np.ndarray
+    centre_index: np.ndarray
+    ring: tuple[np.ndarray, ...]
     zone: np.ndarray
     falloff: np.ndarray
     force: np.ndarray
     pinned: np.ndarray
+    jaw: JawRig | None = None
+    eyelids: tuple[EyelidRig, ...] = ()
     source: str = ""
 
     @property
     def count(self) -> int:
-        return len(self.names)
+        """How many muscles (the controls are not counted)."""
+        return len(self.force)
+
+    @property
+    def controls(self) -> tuple[str, ...]:
+        return self.names[self.count:]
 
     def index(self, name: str) -> int:
         return self.names.index(name)
@@ -141,37 +244,91 @@ def _check_side(name: str, x: tuple[float, float], width: float, where: str) -> 
         )
 
 
+def _upper_over_lower(mesh: FaceMesh, upper: np.ndarray, lower: np.ndarray, where: str) -> None:
+    below = np.flatnonzero(mesh.vertices[upper, 1] <= mesh.vertices[lower, 1])
+    if len(below):
+        k = below[0]
+        raise InputError(f"{where}: upper point {k} (vertex {upper[k]}) does not lie above its lower partner (vertex {lower[k]})")
+
+
 def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -> MuscleSet:
     """Check a muscle file against a mesh and resolve it to arrays."""
     width = float(np.ptp(mesh.vertices[:, 0]))
-    attachment, insertion, zone, falloff, force = [], [], [], [], []
+    kind, attachment, insertion, centres, rings, zone, falloff, force = [], [], [], [], [], [], [], []
     for m in spec.muscles:
         where = f"{source}: muscle {m.name}"
-        o = _snap(m.attachment, mesh, f"{where}: attachment")
-        i = _snap(m.insertion, mesh, f"{where}: insertion")
-        if np.linalg.norm(mesh.vertices[o] - mesh.vertices[i]) <= 0:
-            raise InputError(f"{where}: zero length (attachment and insertion are the same point)")
-        _check_side(m.name, (mesh.vertices[o, 0], mesh.vertices[i, 0]), width, where)
-        attachment.append(o)
-        insertion.append(i)
-        zone.append(np.radians(m.zone or spec.defaults.zone))
-        falloff.append(m.falloff or spec.defaults.falloff)
+        if m.kind == "linear":
+            o = _snap(m.attachment, mesh, f"{where}: attachment")
+            i = _snap(m.insertion, mesh, f"{where}: insertion")
+            if np.linalg.norm(mesh.vertices[o] - mesh.vertices[i]) <= 0:
+                raise InputError(f"{where}: zero length (attachment and insertion are the same point)")
+            _check_side(m.name, (mesh.vertices[o, 0], mesh.vertices[i, 0]), width, where)
+            kind.append(LINEAR)
+            attachment.append(o)
+            insertion.append(i)
+            centres.append([o])
+            rings.append(np.zeros(0, dtype=np.int64))
+            zone.append(np.radians(m.zone or spec.defaults.zone))
+            falloff.append(m.falloff or spec.defaults.falloff)
+        else:
+            centre = [_snap(p, mesh, f"{where}: centre") for p in m.centre]
+            ring = np.array([_snap(p, mesh, f"{where}: ring") for p in m.ring], dtype=np.int64)
+            if len(set(ring.tolist())) < 4:
+                raise InputError(f"{where}: ring: needs at least 4 distinct vertices")
+            middle = mesh.vertices[centre].mean(axis=0)
+            _check_side(m.name, (middle[0], middle[0]), width, where)
+            kind.append(SPHINCTER)
+            attachment.append(-1)
+            insertion.append(int(ring[0]))
+            centres.append(centre)
+            rings.append(ring)
+            zone.append(np.pi)
+            falloff.append(m.falloff or (1.0, 1.5))
         force.append(m.force or spec.defaults.force)
     for v in spec.pinned.vertices:
         _snap(v, mesh, f"{source}: pinned")
-    pinned = set(attachment) | set(spec.pinned.vertices)
+    pinned = {a for a in attachment if a >= 0} | set(spec.pinned.vertices)
     if spec.pinned.boundary == "outer":
         if not mesh.boundary_loops:
             raise InputError(f"{source}: pinned: the mesh has no boundary to pin (a closed head?)")
         pinned |= set(mesh.boundary_loops[0].tolist())
+    jaw, controls = None, []
+    if spec.jaw is not None:
+        where = f"{source}: jaw"
+        hinge = np.array([mesh.vertices[_snap(p, mesh, f"{where}: hinge")] if isinstance(p, int) else p
+                          for p in spec.jaw.hinge], dtype=np.float64)  # a point may lie inside the head
+        if np.linalg.norm(hinge[1] - hinge[0]) < 0.1 * width:
+            raise InputError(f"{where}: hinge: its two points must lie on either side of the face")
+        lower = np.array([_snap(p, mesh, f"{where}: lower") for p in spec.jaw.lower], dtype=np.int64)
+        upper = np.array([_snap(p, mesh, f"{where}: upper") for p in spec.jaw.upper], dtype=np.int64)
+        _upper_over_lower(mesh, upper, lower, where)
+        jaw = JawRig(hinge, lower, upper, float(np.radians(spec.jaw.max_angle)))
+        controls.append("jaw")
+    eyelids = []
+    for lid in spec.eyelids:
+        where = f"{source}: eyelid {lid.name}"
+        upper = np.array([_snap(p, mesh, f"{where}: upper") for p in lid.upper], dtype=np.int64)
+        lower = np.array([_snap(p, mesh, f"{where}: lower") for p in lid.lower], dtype=np.int64)
+        middle = mesh.vertices[np.concatenate([upper, lower])].mean(axis=0)
+        _check_side(lid.name, (middle[0], middle[0]), width, where)
+        _upper_over_lower(mesh, upper, lower, where)
+        eyelids.append(EyelidRig(lid.name, upper, lower, lid.reach))
+        controls.append(lid.name)
+    centre_start = np.cumsum([0] + [len(c) for c in centres]).astype(np.int64)
     return MuscleSet(
-        names=tuple(m.name for m in spec.muscles),
+        names=tuple(m.name for m in spec.muscles) + tuple(controls),
+        kind=np.array(kind, dtype=np.int64),
         attachment=np.array(attachment, dtype=np.int64),
         insertion=np.array(insertion, dtype=np.int64),
+        centre_start=centre_start,
+        centre_index=np.array([v for c in centres for v in c], dtype=np.int64),
+        ring=tuple(rings),
         zone=np.array(zone, dtype=np.float64),
         falloff=np.array(falloff, dtype=np.float64).reshape(-1, 2),
         force=np.array(force, dtype=np.float64),
         pinned=np.array(sorted(pinned), dtype=np.int64),
+        jaw=jaw,
+        eyelids=tuple(eyelids),
         source=source,
     )
 
@@ -183,10 +340,18 @@ def load_muscles(path: str | Path, mesh: FaceMesh) -> MuscleSet:
 
 def muscles_as_points(spec: MuscleFile, mesh: FaceMesh) -> MuscleFile:
     """The same muscle file with every landmark index replaced by that vertex's position
-    on ``mesh``: muscles carried by position to a mesh of another topology (a subdivided
-    face, a scan), where they snap to the nearest vertex."""
+    on ``mesh``: muscles, jaw and eyelids carried by position to a mesh of another
+    topology (a subdivided face, a scan), where they snap to the nearest vertex."""
     def point(p: Point) -> Point:
         return tuple(float(c) for c in mesh.vertices[p]) if isinstance(p, int) else p
 
-    muscles = [m.model_copy(update={"attachment": point(m.attachment), "insertion": point(m.insertion)}) for m in spec.muscles]
-    return spec.model_copy(update={"muscles": muscles, "pinned": spec.pinned.model_copy(update={"vertices": []})})
+    def carried(entry, *fields):
+        return entry.model_copy(update={f: [point(p) for p in getattr(entry, f)] for f in fields})
+
+    muscles = [m.model_copy(update={"attachment": point(m.attachment), "insertion": point(m.insertion)})
+               if m.kind == "linear" else carried(m, "centre", "ring") for m in spec.muscles]
+    jaw = spec.jaw and carried(spec.jaw, "hinge", "lower", "upper")
+    return spec.model_copy(update={
+        "muscles": muscles, "jaw": jaw, "eyelids": [carried(e, "upper", "lower") for e in spec.eyelids],
+        "pinned": spec.pinned.model_copy(update={"vertices": []}),
+    })

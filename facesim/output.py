@@ -71,10 +71,11 @@ def arrows_for(animation: Animation) -> np.ndarray | None:
     ])
 
 
-def _render_chunk(rest, faces, settings, backend, positions, arrows):
+def _render_chunk(rest, faces, settings, backend, positions, arrows, pose):
     """Frames rendered in a worker process, by the process's one shared renderer."""
     renderer = shared_renderer(rest, faces, settings, backend)
-    return np.stack([renderer.render(p, None if arrows is None else arrows[k]) for k, p in enumerate(positions)])
+    return np.stack([renderer.render(p, None if arrows is None else arrows[k], None if pose is None else pose[k])
+                     for k, p in enumerate(positions)])
 
 
 def render_frames(animation: Animation, settings: RenderSettings, backend: str = "auto", jobs: int = 1,
@@ -93,7 +94,7 @@ def render_frames(animation: Animation, settings: RenderSettings, backend: str =
         try:
             out = []
             for k, p in enumerate(animation.positions):
-                out.append(renderer.render(p, None if arrows is None else arrows[k]))
+                out.append(renderer.render(p, None if arrows is None else arrows[k], animation.pose_at(k)))
                 if progress:
                     progress(1)
             return np.stack(out)
@@ -101,11 +102,13 @@ def render_frames(animation: Animation, settings: RenderSettings, backend: str =
             if own:
                 renderer.close()
     bounds = np.linspace(0, frames, jobs * 2 + 1).astype(int)
-    chunks = [(animation.positions[a:b], None if arrows is None else arrows[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+    pose = animation.pose
+    chunks = [(animation.positions[a:b], None if arrows is None else arrows[a:b], None if pose is None else pose[a:b])
+              for a, b in zip(bounds[:-1], bounds[1:])]
     fixed = [(animation.rest, animation.faces, settings, backend)] * len(chunks)
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
         out = []
-        for (positions, _), images in zip(chunks, pool.map(_render_chunk, *zip(*fixed), *zip(*chunks))):
+        for (positions, *_), images in zip(chunks, pool.map(_render_chunk, *zip(*fixed), *zip(*chunks))):
             out.append(images)
             if progress:
                 progress(len(positions))
@@ -144,6 +147,7 @@ def write_npz(animation: Animation, path: Path) -> None:
             tmp, positions=animation.positions, faces=animation.faces, rest=animation.rest,
             activations=animation.activations, muscles=np.array(animation.muscle_names), dt=animation.dt,
             kinetic_energy=animation.kinetic_energy,
+            pose=np.zeros((animation.frames, 5)) if animation.pose is None else animation.pose,
         )
 
 

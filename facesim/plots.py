@@ -21,10 +21,8 @@ def muscle_regions(model) -> list[np.ndarray]:
     visited, stack, region, delta = np.zeros(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n)
     regions = []
     for m in range(model.muscle_count):
-        count = kernels._region_of_influence(m, frame, model.muscle_origin, model.muscle_insertion_point,
-                                             model.muscle_insertion, model.muscle_cos_zone, model.muscle_r,
-                                             model.muscle_r_max, model.neighbour_start, model.neighbour_index,
-                                             visited, m + 1, stack, region, delta)
+        count = kernels._region_of_influence(m, frame, *model.muscle_arrays(), model.neighbour_start,
+                                             model.neighbour_index, visited, m + 1, stack, region, delta)
         regions.append(region[:count].copy())
     return regions
 
@@ -47,17 +45,26 @@ def plot_muscles(model, path: Path) -> None:
         family = names[m].removesuffix("_l").removesuffix("_r")
         colour = cmap(families.index(family) % 20)
         ax.scatter(x[region, 0], x[region, 1], s=28, color=colour, alpha=0.35, lw=0)
-        o, i = model.muscles.attachment[m], model.muscles.insertion[m]
-        ax.annotate("", xy=x[o, :2], xytext=x[i, :2],
-                    arrowprops=dict(arrowstyle="-|>", color=colour, lw=1.8, shrinkA=0, shrinkB=0))
+        ring = model.muscles.ring[m]
+        if len(ring):  # a sphincter: its ring, closed, in order around its middle
+            middle = x[ring, :2].mean(axis=0)
+            ring = ring[np.argsort(np.arctan2(x[ring, 1] - middle[1], x[ring, 0] - middle[0]))]
+            loop = x[np.append(ring, ring[0])]
+            ax.plot(loop[:, 0], loop[:, 1], color=colour, lw=1.8, ls="--")
+            label_at = x[ring[np.argmin(x[ring, 0])]]
+        else:
+            o, i = model.muscles.attachment[m], model.muscles.insertion[m]
+            ax.annotate("", xy=x[o, :2], xytext=x[i, :2],
+                        arrowprops=dict(arrowstyle="-|>", color=colour, lw=1.8, shrinkA=0, shrinkB=0))
+            label_at = x[o]
         if not names[m].endswith("_l"):
-            ax.text(x[o, 0], x[o, 1], " " + family.replace("_", " "), fontsize=6.5, color="0.15",
-                    ha="right" if x[o, 0] < 0 else "left", va="center")
+            ax.text(label_at[0], label_at[1], " " + family.replace("_", " "), fontsize=6.5, color="0.15",
+                    ha="right" if label_at[0] < 0 else "left", va="center")
     pinned = model.pinned
     ax.scatter(x[pinned, 0], x[pinned, 1], s=8, color="k", marker="s", label="pinned")
     ax.set_aspect("equal")
     ax.set_axis_off()
-    ax.set_title(f"{model.muscle_count} muscles: arrows from insertion to attachment, regions of influence shaded")
+    ax.set_title(f"{model.muscle_count} muscles: arrows from insertion to attachment, sphincter rings dashed, regions shaded")
     ax.legend(loc="lower right", fontsize=8)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, bbox_inches="tight")

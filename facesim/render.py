@@ -5,7 +5,9 @@ One :class:`FaceRenderer` per process is built once and reused for every frame: 
 scene (skin, eyeballs with iris and pupil behind the eye openings, a dark mouth cavity
 behind the lips, a key and a fill light, a plain background) never changes; per frame
 only the face's vertex buffer is rewritten in place (positions and Numba-computed
-normals), never the scene.
+normals), never the scene, and the head and eye nodes get their pose: the head turns as a
+rigid body about a pivot at the neck (yaw, pitch, roll), the eyeballs about their centres
+(gaze yaw, pitch), under a fixed camera and fixed lights.
 
 ``PYOPENGL_PLATFORM`` must be set before anything imports OpenGL, so nothing here imports
 pyrender until :func:`use_backend` has chosen the platform.
@@ -22,6 +24,8 @@ import numpy as np
 
 from .errors import InputError, RenderError
 from .kernels import _vertex_normals
+from .mesh import FaceMesh
+from .rig import eyeball
 
 #: Tried in this order by ``--backend auto``. Mesa's software EGL (surfaceless) first: it
 #: renders the same frames about twice as fast as OSMesa here (BENCHMARKS.md), and newer
@@ -38,6 +42,8 @@ IRIS = (0.28, 0.42, 0.52, 1.0)
 PUPIL = (0.03, 0.03, 0.03, 1.0)
 ARROW = (0.85, 0.05, 0.05, 1.0)
 KEY_LIGHT, FILL_LIGHT = 3.2, 1.3
+#: Height of the head's pivot (the atlanto-occipital joint) above the chin, in face heights.
+NECK_HEIGHT = 0.25
 
 
 @dataclass(frozen=True)
@@ -126,12 +132,28 @@ def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
     return pose
 
 
+def _rotation(yaw: float = 0.0, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
+    """3x3 rotation for angles in degrees (facesim.spec.POSE): yaw about +y toward +x,
+    pitch lifting +z toward +y, roll tilting +y toward +x."""
+    y, p, r = np.radians([yaw, pitch, roll])
+    turn = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
+    lift = np.array([[1, 0, 0], [0, np.cos(p), np.sin(p)], [0, -np.sin(p), np.cos(p)]])
+    tilt = np.array([[np.cos(r), np.sin(r), 0], [-np.sin(r), np.cos(r), 0], [0, 0, 1]])
+    return turn @ lift @ tilt
+
+
+def _pose(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
+    """4x4 pose: turn by ``rotation``, then move by ``translation``."""
+    matrix = np.eye(4)
+    matrix[:3, :3] = rotation
+    matrix[:3, 3] = translation
+    return matrix
+
+
 def _openings(rest: np.ndarray, faces: np.ndarray) -> tuple[list[np.ndarray], np.ndarray | None]:
     """The eye openings (right, left) and the mouth opening among the mesh's inner
     boundary loops: the mouth is the lowest loop on the midline, the eyes the highest
     pair on either side. Missing ones are left out."""
-    from .mesh import FaceMesh
-
     loops = FaceMesh(rest, faces).boundary_loops[1:]
     centres = [rest[loop].mean(axis=0) for loop in loops]
     width = np.ptp(rest[:, 0])
@@ -158,8 +180,14 @@ class FaceRenderer:
         scene = pyrender.Scene(bg_color=BACKGROUND, ambient_light=(0.28, 0.26, 0.26))
         skin = pyrender.MetallicRoughnessMaterial(baseColorFactor=SKIN, metallicFactor=0.0, roughnessFactor=0.75, doubleSided=True)
         self._face = pyrender.Primitive(positions=rest, normals=self._normals, indices=self._faces, material=skin)
-        scene.add(pyrender.Mesh([self._face]))
+        self._head = pyrender.Node(name="head", matrix=np.eye(4))
+        scene.add_node(self._head)
+        scene.add(pyrender.Mesh([self._face]), parent_node=self._head)
+        self._eyes: list[tuple] = []
         self._add_eyes_and_mouth(scene, rest, faces, pyrender, trimesh)
+        low, high = rest.min(axis=0), rest.max(axis=0)
+        # The head turns about the top of the spine: behind the jaw, on the mask's back plane.
+        self._neck = np.array([(low[0] + high[0]) / 2, low[1] + NECK_HEIGHT * (high[1] - low[1]), low[2]])
         self._arrows = None
         if settings.show_muscles:
             lines = np.repeat(rest, 2, axis=0)
@@ -167,7 +195,7 @@ class FaceRenderer:
                 positions=lines, mode=pyrender.constants.GLTF.LINES,
                 material=pyrender.MetallicRoughnessMaterial(baseColorFactor=ARROW, emissiveFactor=ARROW[:3]),
             )
-            scene.add(pyrender.Mesh([self._arrows]))
+            scene.add(pyrender.Mesh([self._arrows]), parent_node=self._head)
 
         centre = (rest.min(axis=0) + rest.max(axis=0)) / 2
         extent = np.ptp(rest, axis=0)
@@ -200,22 +228,21 @@ class FaceRenderer:
     def _add_eyes_and_mouth(self, scene, rest, faces, pyrender, trimesh) -> None:
         eyes, mouth = _openings(rest, faces)
         for loop in eyes:
-            points = rest[loop]
-            radius = 0.42 * np.ptp(points[:, 0])
-            centre = points.mean(axis=0) - np.array([0.0, 0.0, 0.8 * radius])
+            centre, radius = eyeball(rest[loop])
             ball = trimesh.creation.icosphere(subdivisions=3, radius=radius)
             angle = np.arccos(np.clip(ball.vertices[:, 2] / radius, -1, 1))
             colours = np.where((angle < 0.2)[:, None], PUPIL, np.where((angle < 0.46)[:, None], IRIS, SCLERA))
             ball.visual.vertex_colors = (np.asarray(colours) * 255).astype(np.uint8)
-            ball.apply_translation(centre)
-            scene.add(pyrender.Mesh.from_trimesh(ball, smooth=True))
+            node = scene.add(pyrender.Mesh.from_trimesh(ball, smooth=True), pose=_pose(np.eye(3), centre),
+                             parent_node=self._head)
+            self._eyes.append((node, centre))
         if mouth is not None:
             points = rest[mouth]
             cavity = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
             cavity.apply_scale([0.55 * np.ptp(points[:, 0]), 1.2, 1.0])
             cavity.apply_translation(points.mean(axis=0) - np.array([0.0, 0.0, 1.1]))
             material = pyrender.MetallicRoughnessMaterial(baseColorFactor=MOUTH, metallicFactor=0.0, roughnessFactor=1.0)
-            scene.add(pyrender.Mesh.from_trimesh(cavity, material=material, smooth=True))
+            scene.add(pyrender.Mesh.from_trimesh(cavity, material=material, smooth=True), parent_node=self._head)
 
     def view(self, yaw: float = 0.0, pitch: float = 0.0, light: float = 1.0) -> None:
         """Turn the camera about the face by yaw and pitch (degrees, added to the preset)
@@ -232,9 +259,19 @@ class FaceRenderer:
         GL.glBindBuffer(GL.GL_ARRAY_BUFFER, primitive._buffers[0])
         GL.glBufferSubData(GL.GL_ARRAY_BUFFER, 0, data.nbytes, data)
 
-    def render(self, positions: np.ndarray, arrows: np.ndarray | None = None) -> np.ndarray:
+    def pose(self, head_yaw=0.0, head_pitch=0.0, head_roll=0.0, gaze_yaw=0.0, gaze_pitch=0.0) -> None:
+        """Turn the head about the neck and the eyes about their centres (degrees, in the
+        order of facesim.spec.POSE)."""
+        head = _rotation(head_yaw, head_pitch, head_roll)
+        self._scene.set_pose(self._head, _pose(head, self._neck - head @ self._neck))  # about the neck
+        for node, centre in self._eyes:  # the eyeball is built at the origin, pupil along +z
+            self._scene.set_pose(node, _pose(_rotation(gaze_yaw, gaze_pitch), centre))
+
+    def render(self, positions: np.ndarray, arrows: np.ndarray | None = None, pose=None) -> np.ndarray:
         """One frame: positions (n, 3) of the face, optional arrows (n, 3) drawn from
-        each vertex (muscle forces). Returns (height, width, 3) uint8."""
+        each vertex (muscle forces), optional head and gaze angles (5,) in degrees.
+        Returns (height, width, 3) uint8."""
+        self.pose(*(() if pose is None else pose))
         positions = np.ascontiguousarray(positions, dtype=np.float64)
         _vertex_normals(positions, self._faces, self._normals)
         self._renderer._platform.make_current()

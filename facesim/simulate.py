@@ -20,7 +20,7 @@ from .errors import SimulationError
 from .mesh import FaceMesh, load_mesh
 from .model import Material, Model, build_model, project_uv
 from .muscles import MuscleSet, load_muscles
-from .spec import Spec, activation_table
+from .spec import Spec, activation_table, pose_table
 
 #: A run is "runaway" when its kinetic energy exceeds that of every vertex crossing a
 #: tenth of the face in one frame: far beyond any expression, short of overflow.
@@ -32,8 +32,9 @@ class Animation:
     """The result of a simulation.
 
     positions : (frames, n, 3) cm; rest : (n, 3); faces : (t, 3);
-    activations : (frames, M); kinetic_energy, smallest_area : (frames,) float;
-    inverted : (frames,) int (triangles facing against their rest normal).
+    activations : (frames, M + controls); pose : (frames, 5) head and gaze angles in
+    degrees (facesim.spec.POSE), applied at render time; kinetic_energy, smallest_area :
+    (frames,) float; inverted : (frames,) int (triangles facing against their rest normal).
     """
 
     name: str
@@ -49,6 +50,10 @@ class Animation:
     smallest_area: np.ndarray
     seconds: float = 0.0
     model: Model | None = field(default=None, repr=False, compare=False)
+    pose: np.ndarray | None = None
+
+    def pose_at(self, frame: int) -> np.ndarray | None:
+        return None if self.pose is None else self.pose[frame]
 
     @property
     def frames(self) -> int:
@@ -85,6 +90,8 @@ def run(
     """Simulate ``activations`` (frames, M) from rest. Returns positions, kinetic energy,
     inverted-triangle counts and smallest relative areas per frame."""
     frames = len(activations)
+    if activations.ndim != 2 or activations.shape[1] != len(model.muscles.names):
+        raise ValueError(f"activations must be (frames, {len(model.muscles.names)}), one column per muscle and control")
     n = model.vertex_count
     x = model.rest_position.copy()
     v = np.zeros_like(x)
@@ -129,6 +136,7 @@ def simulate(spec: Spec, stop_on_inversion: bool = True) -> Animation:
         smallest_area=smallest,
         seconds=seconds,
         model=model,
+        pose=pose_table(spec) if spec.pose else None,
     )
 
 
@@ -147,10 +155,9 @@ def muscle_forces(model: Model, positions: np.ndarray, activation: np.ndarray) -
     x = np.ascontiguousarray(positions, dtype=np.float64)
     force = np.zeros_like(x)
     kernels._muscle_forces(
-        muscle_frame(model, x), x, np.ascontiguousarray(activation, dtype=np.float64), model.muscle_origin, model.muscle_insertion_point,
-        model.muscle_insertion, model.muscle_cos_zone, model.muscle_r, model.muscle_r_max, model.muscle_force,
-        model.pinned, model.neighbour_start, model.neighbour_index, model.ring_start, model.ring_a, model.ring_b,
-        model.material.uv_projection, force, np.zeros(n, dtype=np.int64), 0, np.empty(n, dtype=np.int64),
+        muscle_frame(model, x), x, np.ascontiguousarray(activation, dtype=np.float64), *model.muscle_arrays(),
+        model.muscle_force, model.pinned, model.neighbour_start, model.neighbour_index, model.ring_start, model.ring_a,
+        model.ring_b, model.material.uv_projection, force, np.zeros(n, dtype=np.int64), 0, np.empty(n, dtype=np.int64),
         np.empty(n, dtype=np.int64), np.empty(n),
     )
     return force

@@ -9,7 +9,8 @@ time step. A spec is a YAML file validated by pydantic (unknown fields are error
       zygomaticus_major_l: 1.0
     aus: {AU12: D}              # FACS action units (facesim.timeline)
     expressions: {joy: 0.5}     # MPEG-4 expressions by name
-    timeline: [...]             # key-framed tracks of muscles, AUs, expressions
+    timeline: [...]             # key-framed tracks of muscles, AUs, expressions, jaw, eyelids
+    pose: [...]                 # key-framed head yaw/pitch/roll and gaze yaw/pitch (degrees)
     include: [{spec: happy, weight: 0.6}]   # blends of other specs
     sequence: [...]             # expressions one after another
     material: {damping: 40}     # optional overrides of facesim.model.Material
@@ -58,37 +59,68 @@ class Envelope(Strict):
     intensity: Activation = 1.0
 
 
-class Track(Strict):
+class _Curve(Strict):
+    """What every key-framed curve has: its time unit and interpolation."""
+
+    unit: Literal["frame", "second"] = "frame"
+    interpolation: Literal[INTERPOLATIONS] = "hold"  # type: ignore[valid-type]
+    tension: float = Field(0.0, ge=0.0, le=1.0)
+
+    @field_validator("keys", check_fields=False)
+    @classmethod
+    def _increasing(cls, keys):
+        if keys is not None:
+            if not keys:
+                raise ValueError("at least one key-frame")
+            times = [k[0] for k in keys]
+            if any(b <= a for a, b in zip(times, times[1:])):
+                raise ValueError(f"out of order, times must increase strictly, got {times}")
+        return keys
+
+    def curve(self, keys, dt: float, frames: int) -> np.ndarray:
+        """The curve through ``keys`` (time, value) at every frame."""
+        times, values = (np.array(v, dtype=float) for v in zip(*keys))
+        times = times / dt if self.unit == "second" else times
+        return interpolate(times, values, np.arange(frames, dtype=float), self.interpolation, self.tension)
+
+
+class Track(_Curve):
     """A key-framed curve for one muscle (``zygomaticus_major_l``), one action unit
-    (``AU12``) or one named expression (``happy``, a spec in expressions/, or a path)."""
+    (``AU12``), one named expression (``happy``, a spec in expressions/, or a path), or a
+    control of the jaw and eyelids (``jaw``, ``eyelid_l``)."""
 
     target: str = Field(..., min_length=1)
     keys: list[tuple[float, Activation]] | None = None
     envelope: Envelope | None = None
-    unit: Literal["frame", "second"] = "frame"
-    interpolation: Literal[INTERPOLATIONS] = "hold"  # type: ignore[valid-type]
-    tension: float = Field(0.0, ge=0.0, le=1.0)
 
     @model_validator(mode="after")
     def _keys_or_envelope(self):
         if (self.keys is None) == (self.envelope is None):
             raise ValueError("give either keys or an envelope")
-        if self.keys is not None:
-            if not self.keys:
-                raise ValueError("keys: at least one key-frame")
-            times = [k[0] for k in self.keys]
-            if any(b <= a for a, b in zip(times, times[1:])):
-                raise ValueError(f"keys: out of order, times must increase strictly, got {times}")
         return self
 
-    def key_frames(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    def values(self, dt: float, frames: int) -> np.ndarray:
         if self.envelope is not None:
             e = self.envelope
-            keys = envelope_keys(e.start, e.onset, e.apex, e.offset, e.intensity)
-        else:
-            keys = self.keys
-        times, values = (np.array(v, dtype=float) for v in zip(*keys))
-        return (times / dt if self.unit == "second" else times), values
+            return self.curve(envelope_keys(e.start, e.onset, e.apex, e.offset, e.intensity), dt, frames)
+        return self.curve(self.keys, dt, frames)
+
+
+#: Head and eye angles a pose track can drive, in degrees: head yaw turns the face toward
+#: the subject's left (+x), pitch lifts the chin, roll tilts the head toward the subject's
+#: left shoulder; gaze yaw turns the eyes toward the subject's left, gaze pitch up.
+POSE = ("head_yaw", "head_pitch", "head_roll", "gaze_yaw", "gaze_pitch")
+Angle = Annotated[float, Field(ge=-90.0, le=90.0)]
+
+
+class PoseTrack(_Curve):
+    """A key-framed head or eye angle (degrees), applied at render time."""
+
+    target: Literal[POSE]  # type: ignore[valid-type]
+    keys: list[tuple[float, Angle]]
+
+    def values(self, dt: float, frames: int) -> np.ndarray:
+        return self.curve(self.keys, dt, frames)
 
 
 class Include(Strict):
@@ -124,6 +156,7 @@ class Spec(Strict):
     aus: dict[str, float | str] = Field(default_factory=dict, description="FACS action units: A-E or 0-1")
     expressions: dict[str, Activation] = Field(default_factory=dict, description="MPEG-4 expressions by name")
     timeline: list[Track] = Field(default_factory=list)
+    pose: list[PoseTrack] = Field(default_factory=list, description="head and gaze angles over time")
     include: list[Include] = Field(default_factory=list)
     sequence: list[Segment] = Field(default_factory=list)
     material: Material = Material()
@@ -222,6 +255,15 @@ def blend_spec(blend: str, frames: int | None = None) -> Spec:
     return spec
 
 
+def pose_table(spec: Spec) -> np.ndarray:
+    """(frames, 5) head and gaze angles in degrees, in the order of ``POSE``; zero where
+    no track drives them. Several tracks of one angle add up."""
+    table = np.zeros((spec.frames, len(POSE)))
+    for track in spec.pose:
+        table[:, POSE.index(track.target)] += track.values(spec.dt, spec.frames)
+    return table
+
+
 def _ease(frames: int, onset: int) -> np.ndarray:
     frame = np.arange(1, frames + 1)
     return np.ones(frames) if onset == 0 else 0.5 - 0.5 * np.cos(np.pi * np.minimum(frame / onset, 1.0))
@@ -247,7 +289,6 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
     frames = spec.frames
     table = np.zeros((frames, len(names)))
     ease = _ease(frames, spec.onset)
-    query = np.arange(frames, dtype=float)
 
     def fail(where: str, message: str):
         raise InputError(f"{spec.source}: {where}: {message}")
@@ -282,8 +323,7 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
 
     au_curves = {au: ease * value for au, value in spec.aus.items()}
     for k, track in enumerate(spec.timeline):
-        times, values = track.key_frames(spec.dt)
-        curve = interpolate(times, values, query, track.interpolation, track.tension)
+        curve = track.values(spec.dt, frames)
         where = f"timeline -> {k} -> target"
         if re.fullmatch(r"AU\d+", track.target):
             au_curves[track.target] = au_curves.get(track.target, 0) + curve

@@ -71,7 +71,9 @@ def envelope_keys(start: float, onset: float, apex: float, offset: float, intens
 # --- FACS action units ----------------------------------------------------------------
 
 #: Action unit -> (name, muscles and how much of each). Muscles are given without side;
-#: an AU drives both sides. AUs whose muscles the face does not have are errors.
+#: an AU drives both sides. The jaw and the eyelids (facesim.rig) count as muscles here:
+#: AU26 opens the jaw half way (half its max_angle), AU27 fully. AUs whose muscles the
+#: face does not have are errors.
 ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     "AU1": ("inner brow raiser", {"frontalis_medial": 1.0}),
     "AU2": ("outer brow raiser", {"frontalis_lateral": 1.0, "frontalis_outer": 1.0}),
@@ -92,10 +94,10 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     "AU22": ("lip funneler", {"orbicularis_oris": 0.7}),
     "AU23": ("lip tightener", {"orbicularis_oris": 0.8}),
     "AU24": ("lip pressor", {"orbicularis_oris": 0.9}),
-    "AU26": ("jaw drop", {"jaw": 1.0}),
+    "AU26": ("jaw drop", {"jaw": 0.5}),
     "AU27": ("mouth stretch", {"jaw": 1.0}),
-    "AU43": ("eyes closed", {"eyelids": 1.0}),
-    "AU45": ("blink", {"eyelids": 1.0}),
+    "AU43": ("eyes closed", {"eyelid": 1.0}),
+    "AU45": ("blink", {"eyelid": 1.0}),
 }
 #: FACS intensity letters, trace (A) to maximum (E).
 FACS_LETTERS = {"A": 0.2, "B": 0.4, "C": 0.6, "D": 0.8, "E": 1.0}

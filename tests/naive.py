@@ -48,8 +48,10 @@ def repulsion_terms(x, xp, vertex, edge, rest, k0, zeta):
     return stiff, pull
 
 
-def tissue_terms(x, rest_position, tissue):
-    return np.full(len(x), -tissue), -tissue * (x - rest_position)
+def tissue_terms(x, target, tissue, hold=0.0):
+    """Springs of stiffness tissue + hold tying each vertex to its target."""
+    k = tissue + np.broadcast_to(hold, (len(x),))
+    return -k, -k[:, None] * (x - target)
 
 
 def project_uv(x, cx, cz, radius):
@@ -65,12 +67,29 @@ def falloff(origin, insertion, points, cos_zone, r, r_max):
     with np.errstate(invalid="ignore", divide="ignore"):
         cos_beta = op @ oi / (dist * np.linalg.norm(oi))
         angular = np.where(cos_beta >= cos_zone, (cos_beta - cos_zone) / (1 - cos_zone), 0.0)
-        radial = np.where(
+    return np.where(dist > 0, angular * radial(dist, r, r_max), 0.0)
+
+
+def radial(dist, r, r_max):
+    """δ_R of eq. 3.3."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(
             dist <= r,
             np.cos(np.pi / 2 * (r - dist) / r),
             np.where(dist <= r_max, np.cos(np.pi / 2 * (dist - r) / (r_max - r)), 0.0),
         )
-    return np.where(dist > 0, angular * radial, 0.0)
+
+
+def delta(model, m, frame):
+    """δ of muscle m at every point: eq. 3.4 for a linear muscle; for a sphincter, δ_R of
+    eq. 3.3 in the elliptical radius about its centre."""
+    origin = model.muscle_origin[m]
+    if model.muscle_kind[m] == 1:
+        a, b = model.muscle_axes[m]
+        rho = np.hypot((frame[:, 0] - origin[0]) / a, (frame[:, 1] - origin[1]) / b)
+        return radial(rho, model.muscle_r[m], model.muscle_r_max[m])
+    return falloff(origin, model.muscle_insertion_point[m], frame, model.muscle_cos_zone[m], model.muscle_r[m],
+                   model.muscle_r_max[m])
 
 
 def region_of_influence(delta, insertion, edges, n):
@@ -116,15 +135,14 @@ def muscle_forces(model, xp, activation):
     use_uv = model.material.uv_projection
     frame = project_uv(xp, model.axis_x, model.axis_z, model.radius) if use_uv else xp
     edges = model.spring_indices
-    for m in np.flatnonzero(activation):
+    for m in np.flatnonzero(activation[:model.muscle_count]):
         origin = model.muscle_origin[m]
-        delta = falloff(origin, model.muscle_insertion_point[m], frame, model.muscle_cos_zone[m],
-                        model.muscle_r[m], model.muscle_r_max[m])
-        for i in region_of_influence(delta, model.muscle_insertion[m], edges, len(xp)):
+        d = delta(model, m, frame)
+        for i in region_of_influence(d, model.muscle_insertion[m], edges, len(xp)):
             if model.pinned[i]:
                 continue
             direction = origin - frame[i]
-            f = activation[m] * model.muscle_force[m] * delta[i] * direction / np.linalg.norm(direction)
+            f = activation[m] * model.muscle_force[m] * d[i] * direction / np.linalg.norm(direction)
             force[i] += back_project(i, f, frame, xp, model.faces, edges) if use_uv else f
     return force
 
@@ -136,9 +154,8 @@ def step(model, x, v, activation, h):
     free = ~model.pinned
     xp = np.where(free[:, None], x + h * v, x)
     stiff, pull = spring_terms(x, xp, model.spring_indices, model.spring_rest_length, mat.stiffness, mat.nonlinearity)
-    if mat.tissue > 0:
-        s, p = tissue_terms(x, model.rest_position, mat.tissue)
-        stiff, pull = stiff + s, pull + p
+    s, p = tissue_terms(x, model.rest_position, mat.tissue)
+    stiff, pull = stiff + s, pull + p
     if mat.edge_repulsion:
         s, p = repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance,
                                mat.stiffness, mat.repulsion_nonlinearity)
@@ -147,7 +164,26 @@ def step(model, x, v, activation, h):
     denominator = np.maximum(mat.mass + h * mat.damping - h * h * stiff, mat.mass)
     v_new = (mat.mass * v + h * force + h * pull) / denominator[:, None]
     v_new[~free] = 0
-    return x + h * v_new, v_new
+    return contacts(model, x + h * v_new, v_new)
+
+
+def contacts(model, x, v):
+    """Each lip and lid pair (upper, lower) kept its gap apart vertically; both share the
+    correction (a pinned one keeps still) and their mean vertical velocity."""
+    x, v = x.copy(), v.copy()
+    rig = model.rig
+    for u, l, gap in zip(rig.contact_upper, rig.contact_lower, rig.contact_gap):
+        overlap = gap - (x[u, 1] - x[l, 1])
+        if overlap <= 0:
+            continue
+        moving = [k for k in (u, l) if not model.pinned[k]]
+        for k in moving:
+            x[k, 1] += (1 if k == u else -1) * overlap / len(moving)
+        if v[u, 1] < v[l, 1]:
+            mean = (v[u, 1] + v[l, 1]) / 2
+            for k in (u, l):
+                v[k, 1] = mean if not model.pinned[k] else 0.0
+    return x, v
 
 
 def simulate(model, activations, dt):

@@ -6,7 +6,7 @@ import yaml
 
 from facesim.config import DEFAULT_MUSCLES
 from facesim.errors import InputError
-from facesim.muscles import load_muscles
+from facesim.muscles import LINEAR, load_muscles
 
 THESIS_MUSCLES = [
     "frontalis_medial", "frontalis_lateral", "frontalis_outer", "corrugator_supercilii",
@@ -25,20 +25,28 @@ def test_every_thesis_muscle_on_both_sides_and_procerus(muscles):
 
 def test_indices_valid_and_on_the_side_the_name_says(mesh, muscles):
     x = mesh.vertices[:, 0]
-    for k, name in enumerate(muscles.names):
-        o, i = muscles.attachment[k], muscles.insertion[k]
-        assert 0 <= o < 468 and 0 <= i < 468 and o != i
+    for k, name in enumerate(muscles.names[:muscles.count]):
+        if muscles.kind[k] == LINEAR:
+            points = [muscles.attachment[k], muscles.insertion[k]]
+            assert points[0] != points[1], name
+            sides = x[points]
+        else:  # a sphincter: the side of its centre
+            points = list(muscles.centre_index[muscles.centre_start[k]:muscles.centre_start[k + 1]]) + list(muscles.ring[k])
+            sides = [x[muscles.centre_index[muscles.centre_start[k]:muscles.centre_start[k + 1]]].mean()]
+        assert all(0 <= p < 468 for p in points), name
         if name.endswith("_l"):
-            assert x[o] > 0 and x[i] > 0, name
+            assert min(sides) > 0, name
         elif name.endswith("_r"):
-            assert x[o] < 0 and x[i] < 0, name
+            assert max(sides) < 0, name
         else:
-            assert abs(x[o]) < 1e-6 and abs(x[i]) < 1e-6, name
+            assert max(abs(s) for s in sides) < 1e-6, name
+    assert muscles.controls == ("jaw", "eyelid_r", "eyelid_l")
 
 
 def test_attachments_and_outer_rim_are_pinned_insertions_are_not(mesh, muscles):
     pinned = set(muscles.pinned.tolist())
-    assert set(muscles.attachment.tolist()) <= pinned
+    linear = muscles.kind == LINEAR
+    assert set(muscles.attachment[linear].tolist()) <= pinned
     assert set(mesh.boundary_loops[0].tolist()) <= pinned
     assert not set(muscles.insertion.tolist()) & pinned
 
@@ -60,12 +68,14 @@ def first(data):
     [
         (lambda d: first(d).update(insertion=999), r"muscle frontalis_medial_r: insertion: vertex 999 does not exist"),
         (lambda d: first(d).update(insertion=first(d)["attachment"]), r"muscle frontalis_medial_r: zero length"),
-        (lambda d: first(d).update(kind="sphincter"), r"muscles -> 0 -> kind: Input should be 'linear'"),
-        (lambda d: d["muscles"].append(dict(first(d))), r"duplicate muscle name 'frontalis_medial_r'"),
-        (lambda d: first(d).update(name="frontalis_medial_l"), r"duplicate muscle name 'frontalis_medial_l'"),
+        (lambda d: first(d).update(kind="spiral"), r"muscles -> 0: Input tag 'spiral' found using 'kind' does not match"),
+        (lambda d: first(d).update(kind="sphincter"), r"muscles -> 0 -> sphincter -> centre: Field required"),
+        (lambda d: d["muscles"].append(dict(first(d))), r"duplicate name 'frontalis_medial_r'"),
+        (lambda d: first(d).update(name="frontalis_medial_l"), r"duplicate name 'frontalis_medial_l'"),
+        (lambda d: first(d).update(name="jaw"), r"duplicate name 'jaw'"),
         (lambda d: d["muscles"][1].update(name="frontalis_medial_x_r"),
          r"muscle frontalis_medial_x_r: named for the right side but its points lie at x = 1\.\d+"),
-        (lambda d: first(d).update(name="Frontalis"), r"muscles -> 0 -> name: Value error, must be snake_case"),
+        (lambda d: first(d).update(name="Frontalis"), r"muscles -> 0 -> linear -> name: Value error, must be snake_case"),
         (lambda d: first(d).update(falloff=[1.5, 1.0]), r"falloff: Value error, must be \[r, r_max\]"),
         (lambda d: first(d).update(attachment=[40.0, 0.0, 0.0]), r"muscle frontalis_medial_r: attachment: point \[40.0, 0.0, 0.0\] is \d+\.\d+ cm from the surface"),
     ],
@@ -79,10 +89,22 @@ def test_bad_muscle_files_give_one_line_naming_file_and_muscle(tmp_path, mesh, c
 
 
 def test_muscles_given_as_3d_points_snap_to_the_same_vertices(tmp_path, mesh, muscles):
+    def point(index):
+        return [float(c) + 0.005 for c in mesh.vertices[index]]  # the lips are 0.03 cm apart
+
     def as_points(data):
         for m in data["muscles"]:
             for key in ("attachment", "insertion"):
-                m[key] = [float(c) + 0.05 for c in mesh.vertices[m[key]]]
+                if key in m:
+                    m[key] = point(m[key])
+            for key in ("centre", "ring"):
+                if key in m:
+                    m[key] = [point(i) for i in m[key]]
+        for part in [data["jaw"]] + data["eyelids"]:
+            for key in ("lower", "upper"):
+                part[key] = [point(i) for i in part[key]]
     snapped = load_muscles(write_muscles(tmp_path, as_points), mesh)
-    assert np.array_equal(snapped.attachment, muscles.attachment)
-    assert np.array_equal(snapped.insertion, muscles.insertion)
+    for key in ("attachment", "insertion", "centre_index", "pinned"):
+        assert np.array_equal(getattr(snapped, key), getattr(muscles, key)), key
+    assert all(np.array_equal(a, b) for a, b in zip(snapped.ring, muscles.ring))
+    assert np.array_equal(snapped.jaw.lower, muscles.jaw.lower) and np.array_equal(snapped.eyelids[1].upper, muscles.eyelids[1].upper)

@@ -6,7 +6,9 @@ import yaml
 
 import facesim
 from conftest import EXPRESSIONS
+from facesim.config import DEFAULT_MUSCLES
 from facesim.errors import InputError
+from facesim.muscles import MuscleFile, resolve_muscles
 from facesim.simulate import model_for
 from facesim.spec import activation_table, blend_spec, load_spec
 from facesim.timeline import interpolate
@@ -97,9 +99,15 @@ def test_action_units_drive_their_muscles_with_facs_letters(tmp_path, muscles):
     assert sum(v > 0 for v in last.values()) == 2 + 2 + 3
 
 
-def test_an_action_unit_without_its_muscles_is_an_error(tmp_path, muscles):
+def test_an_action_unit_without_its_muscles_is_an_error(tmp_path, mesh):
+    data = yaml.safe_load(DEFAULT_MUSCLES.read_text())
+    data["muscles"] = [m for m in data["muscles"] if not m["name"].startswith("orbicularis_oculi")]
+    del data["jaw"]
+    stripped = resolve_muscles(MuscleFile.model_validate(data), mesh)
     with pytest.raises(InputError, match=r"aus -> AU6: AU6 \(cheek raiser\) needs the orbicularis oculi"):
-        table(tmp_path, muscles, aus={"AU6": 0.8, "AU12": 1.0})
+        table(tmp_path, stripped, aus={"AU6": 0.8, "AU12": 1.0})
+    with pytest.raises(InputError, match=r"aus -> AU26: AU26 \(jaw drop\) needs the jaw"):
+        table(tmp_path, stripped, aus={"AU26": 0.5})
     with pytest.raises(InputError, match=r"aus: Value error, intensity must be a FACS letter A-E"):
         table(tmp_path, muscles, aus={"AU12": "F"})
 
@@ -131,7 +139,7 @@ def test_sequences_hold_each_expression_and_ease_between(tmp_path, muscles):
 
 
 @pytest.mark.parametrize("track, message", [
-    ({"target": "risorius_l", "keys": [[10, 1.0], [5, 0.0]]}, "keys: out of order"),
+    ({"target": "risorius_l", "keys": [[10, 1.0], [5, 0.0]]}, "keys: Value error, out of order"),
     ({"target": "risorius_l", "keys": [[0, 1.0]], "interpolation": "quadratic"}, "interpolation: Input should be 'linear'"),
     ({"target": "risorius_l", "keys": [[0, 1.0]], "interpolation": "cardinal", "tension": 1.5}, "tension: Input should be less than or equal to 1"),
     ({"target": "risorius_l", "keys": [[0, 1.5]]}, "less than or equal to 1"),

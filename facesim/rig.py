@@ -1,0 +1,225 @@
+"""The bone-driven parts of the face, beyond the thesis: the jaw and the eyelids.
+
+Neither is a muscle pulling skin: each moves a set of *targets*, the positions the skin
+would take if it followed the bone, and the simulation ties the skin to them. The
+hypodermis springs of the model (``Material.tissue``) already tie every vertex to its rest
+position; here the rest position becomes a target that moves. Pinned vertices are set on
+their targets (the rim along the mandible turns with it), the lips and the lid contours
+are driven toward theirs by stiff springs (``Material.drive``) while the jaw opens or the
+lids close, and everything else follows through the springs, with the muscles still
+acting on top.
+
+- **Jaw** (MPEG-4 ``open_jaw``, FACS AU26/AU27): a rotation by ``w θ`` about the hinge
+  axis through the two temporomandibular points, θ = activation × ``max_angle``. The weight
+  w is 1 on the lower lip and the rim below the hinge, 0 on the upper lip and above the
+  hinge, and harmonic in between (the graph Laplacian's Dirichlet problem), so the opening
+  spreads smoothly through the cheeks and the lips part without tearing the corners.
+- **Eyelids** (AU43 eyes closed, AU45 blink): each contour vertex slides over the eyeball
+  about the horizontal axis through its centre, in cylindrical coordinates (x, φ, r) about
+  that axis, to a meeting line one fifth of the way up from the lower lid (the upper lid
+  does most of a blink), at a radius outside the eyeball. The upper target always stays
+  above its lower partner, ``LID_GAP`` apart when closed, so the lids never pass through
+  each other. The skin around the opening, out to ``reach`` eye widths, follows with a
+  harmonic share of the contour's motion.
+
+The jaw's lip lists and the lid contours are paired in order; each pair is also a contact
+(``kernels._contacts``): the upper vertex never drops below its lower partner, so a
+sphincter pressing the lips together, or a closing lid, stops where they meet.
+
+The eyeball (centre and radius from the eye opening) is the same one the renderer draws.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.linalg import spsolve
+
+from .mesh import FaceMesh
+from .muscles import MuscleSet
+
+#: The lips part as a wedge over this fraction of the mouth's width from each corner.
+JAW_WEDGE = 0.3
+#: The mouth corners follow the jaw by this much of the lower lip's travel (a little less
+#: than half: they stay nearer the upper lip), driven with the full ``Material.drive``:
+#: the corner's sliver triangles fold over under any other pull (measured on the default
+#: face: 0.5, or a softer drive, inverts one at 20 degrees). A corner is the mouth
+#: opening's vertex in neither lip list and any vertex within JAW_CORNER_SIZE mouth widths.
+JAW_CORNER = 0.42
+JAW_CORNER_SIZE = 0.025
+#: The skin over the mandible is held to it with this share of ``Material.drive`` times
+#: its jaw weight while the jaw is open: bone under the chin, soft tissue in the cheeks.
+JAW_DRIVE = 0.5
+#: The least vertical gap (cm) between paired lip and lid vertices (less where they are
+#: closer at rest): contact, which a single-layer mesh does not otherwise have.
+CONTACT_GAP = 0.01
+#: Where closed lids meet, as a fraction of the way from the lower lid to the upper one.
+LID_MEETING = 0.2
+#: Gap left between the closed lid contours (cm): they touch but never cross.
+LID_GAP = 0.02
+#: How far outside the eyeball the closed lid slides (cm): the lid's own thickness.
+LID_THICKNESS = 0.06
+
+
+@dataclass(frozen=True)
+class Rig:
+    """Per-vertex arrays of the jaw and eyelids, in the kernels' layout (n vertices).
+
+    jaw_column : activation column of the jaw, -1 without one; jaw_weight : (n,) w;
+    jaw_hinge : (3,) a point on the hinge axis; jaw_axis : (3,) its unit direction (+x);
+    jaw_max : θ at activation 1 (radians); lid_column : (n,) activation column of the
+    eyelid moving each vertex, -1 for none; lid_centre : (n, 3) its eyeball centre;
+    lid_delta : (n, 3) (Δx, Δφ, Δr) at full closure; drive_column : (n,) the control
+    whose activation drives the vertex to its target (the lips: the jaw; the lid contours:
+    their eyelid), -1 for none; drive_weight : (n,) its share of ``Material.drive``;
+    contact_upper, contact_lower, contact_gap : (k,) the lip and lid pairs that may not
+    pass through each other, and the least vertical gap each keeps.
+    """
+
+    jaw_column: int
+    jaw_weight: np.ndarray
+    jaw_hinge: np.ndarray
+    jaw_axis: np.ndarray
+    jaw_max: float
+    lid_column: np.ndarray
+    lid_centre: np.ndarray
+    lid_delta: np.ndarray
+    drive_column: np.ndarray
+    drive_weight: np.ndarray
+    contact_upper: np.ndarray
+    contact_lower: np.ndarray
+    contact_gap: np.ndarray
+
+    def arrays(self) -> tuple:
+        return (self.jaw_column, self.jaw_weight, self.jaw_hinge, self.jaw_axis, self.jaw_max,
+                self.lid_column, self.lid_centre, self.lid_delta, self.drive_column, self.drive_weight,
+                self.contact_upper, self.contact_lower, self.contact_gap)
+
+
+def eyeball(opening: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre and radius of the eyeball behind an eye opening (its points, (k, 3)):
+    radius 0.42 of the opening's width, centre 0.8 radius behind its mean."""
+    radius = 0.42 * float(np.ptp(opening[:, 0]))
+    return opening.mean(axis=0) - np.array([0.0, 0.0, 0.8 * radius]), radius
+
+
+def harmonic(mesh: FaceMesh, fixed: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Values (n, d) that equal ``values`` on the ``fixed`` vertices and are harmonic (the
+    mean of their neighbours) everywhere else: the Dirichlet problem of the graph Laplacian."""
+    n = mesh.vertex_count
+    e = mesh.edges
+    i, j = np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]])
+    adjacency = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)).tocsr()
+    laplacian = (coo_matrix((np.asarray(adjacency.sum(axis=1)).ravel(), (np.arange(n), np.arange(n))), shape=(n, n))
+                 - adjacency).tocsr()
+    out = np.zeros((n, values.shape[1]))
+    out[fixed] = values
+    free = np.setdiff1d(np.arange(n), fixed)
+    if len(free):
+        rhs = -laplacian[free][:, fixed] @ values
+        solution = spsolve(laplacian[free][:, free].tocsc(), rhs)
+        out[free] = solution.reshape(len(free), -1)
+    return out
+
+
+def _jaw(mesh: FaceMesh, muscles: MuscleSet):
+    jaw = muscles.jaw
+    x = mesh.vertices
+    hinge = jaw.hinge
+    axis = hinge[1] - hinge[0]
+    axis = axis / np.linalg.norm(axis) * np.sign(axis[0] or 1.0)
+    below = x[:, 1] < hinge[:, 1].mean()
+    rim = mesh.boundary_loops[0] if mesh.boundary_loops else np.zeros(0, dtype=np.int64)
+    # The lips part as a wedge: toward each mouth corner (the opening's vertices in neither
+    # list, with any vertex all but touching them) their weights meet half way, or the
+    # tissue at the corner folds over.
+    lips = np.concatenate([jaw.lower, jaw.upper])
+    mouth = [loop for loop in mesh.boundary_loops[1:] if np.isin(jaw.lower, loop).any()]
+    corners = np.setdiff1d(mouth[0], lips) if mouth else np.zeros(0, dtype=np.int64)
+    lip_weight = np.isin(lips, jaw.lower).astype(float)
+    if len(corners):
+        width = np.ptp(x[mouth[0], 0])
+        near = np.linalg.norm(x[:, None] - x[None, corners], axis=2).min(axis=1) < JAW_CORNER_SIZE * width
+        corners = np.union1d(corners, np.setdiff1d(np.flatnonzero(near), lips))
+        distance = np.linalg.norm(x[lips, None, :2] - x[None, corners, :2], axis=2).min(axis=1)
+        lip_weight += (0.5 - lip_weight) * _smoothstep(1 - distance / (JAW_WEDGE * width))
+    fixed = np.concatenate([lips, corners, rim, np.flatnonzero(~below)])
+    value = np.concatenate([lip_weight, np.full(len(corners), JAW_CORNER), below[rim].astype(float),
+                            np.zeros(int((~below).sum()))])
+    fixed, first = np.unique(fixed, return_index=True)  # the lips win over the rules after them
+    weight = harmonic(mesh, fixed, value[first, None])[:, 0]
+    return muscles.index("jaw"), np.clip(weight, 0.0, 1.0), hinge[0], axis, jaw.max_angle, corners
+
+
+def _smoothstep(t: np.ndarray) -> np.ndarray:
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * (3 - 2 * t)
+
+
+def _cylindrical(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """(x, φ, r) about the horizontal axis through ``centre``: φ = atan2(y, z) upward."""
+    d = points - centre
+    return np.column_stack([d[:, 0], np.arctan2(d[:, 1], d[:, 2]), np.hypot(d[:, 1], d[:, 2])])
+
+
+def _eyelid(mesh: FaceMesh, lid, centre: np.ndarray, radius: float, width: float):
+    """The contour's (Δx, Δφ, Δr) at full closure, spread harmonically over the skin
+    within ``reach`` eye widths of the opening. Returns the region and its deltas."""
+    x = mesh.vertices
+    upper, lower = _cylindrical(x[lid.upper], centre), _cylindrical(x[lid.lower], centre)
+    meet_x = (upper[:, 0] + lower[:, 0]) / 2
+    meet_phi = lower[:, 1] + LID_MEETING * (upper[:, 1] - lower[:, 1])
+    over_ball = np.sqrt(np.maximum(radius**2 - meet_x**2, 0.0)) + LID_THICKNESS
+    meet_r = np.maximum((upper[:, 2] + lower[:, 2]) / 2, over_ball)
+    half_gap = LID_GAP / 2 / meet_r
+    delta_upper = np.column_stack([meet_x - upper[:, 0], meet_phi + half_gap - upper[:, 1], meet_r - upper[:, 2]])
+    delta_lower = np.column_stack([meet_x - lower[:, 0], meet_phi - half_gap - lower[:, 1], meet_r - lower[:, 2]])
+    contour = np.concatenate([lid.upper, lid.lower])
+    distance = np.linalg.norm((x - centre)[:, :2], axis=1)
+    outside = np.flatnonzero(distance > (0.5 + lid.reach) * width)
+    opening = [loop for loop in mesh.boundary_loops[1:] if np.isin(lid.upper, loop).any()]
+    corners = np.setdiff1d(opening[0], contour) if opening else np.zeros(0, dtype=np.int64)
+    fixed = np.concatenate([contour, corners, np.setdiff1d(outside, contour)])
+    values = np.concatenate([delta_upper, delta_lower, np.zeros((len(fixed) - len(contour), 3))])
+    delta = harmonic(mesh, fixed, values)
+    region = np.setdiff1d(np.flatnonzero(distance <= (0.5 + lid.reach) * width), corners)
+    return region, delta[region], contour
+
+
+def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
+    n = mesh.vertex_count
+    drive_column = np.full(n, -1, dtype=np.int64)
+    drive_weight = np.zeros(n)
+    if muscles.jaw is not None:
+        jaw_column, jaw_weight, hinge, axis, jaw_max, corners = _jaw(mesh, muscles)
+        drive_column[jaw_weight > 0] = jaw_column
+        drive_weight[:] = JAW_DRIVE * jaw_weight
+        drive_weight[corners] = 1.0
+    else:
+        jaw_column, jaw_weight, hinge, axis, jaw_max = -1, np.zeros(n), np.zeros(3), np.array([1.0, 0, 0]), 0.0
+    lid_column = np.full(n, -1, dtype=np.int64)
+    lid_centre = np.zeros((n, 3))
+    lid_delta = np.zeros((n, 3))
+    for lid in muscles.eyelids:
+        opening = [loop for loop in mesh.boundary_loops[1:] if np.isin(lid.upper, loop).any()]
+        points = mesh.vertices[opening[0] if opening else np.concatenate([lid.upper, lid.lower])]
+        centre, radius = eyeball(points)
+        region, delta, contour = _eyelid(mesh, lid, centre, radius, float(np.ptp(points[:, 0])))
+        region_free = region[lid_column[region] < 0]
+        keep = np.isin(region, region_free)
+        lid_column[region_free] = muscles.index(lid.name)
+        lid_centre[region_free] = centre
+        lid_delta[region_free] = delta[keep]
+        drive_column[contour] = muscles.index(lid.name)
+        drive_weight[contour] = 1.0
+    upper = [muscles.jaw.upper] if muscles.jaw is not None else []
+    lower = [muscles.jaw.lower] if muscles.jaw is not None else []
+    upper += [lid.upper for lid in muscles.eyelids]
+    lower += [lid.lower for lid in muscles.eyelids]
+    upper = np.concatenate(upper) if upper else np.zeros(0, dtype=np.int64)
+    lower = np.concatenate(lower) if lower else np.zeros(0, dtype=np.int64)
+    gap = np.minimum(CONTACT_GAP, mesh.vertices[upper, 1] - mesh.vertices[lower, 1])
+    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, lid_column, lid_centre, lid_delta, drive_column, drive_weight,
+               upper, lower, gap)
