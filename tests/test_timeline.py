@@ -159,15 +159,19 @@ def test_composite_expressions_as_blends_of_the_basic_ones(name):
     assert blend.inverted.max() == 0
     shape_gap = np.linalg.norm(composite.positions[-1] - blend.positions[-1], axis=1)
     motion = np.linalg.norm(composite.positions[-1] - composite.rest, axis=1)
-    # the blend makes nearly the same expression: most of the face within 0.3 mm...
-    assert np.median(shape_gap) < 0.03 and shape_gap.max() < 0.75 * motion.max()
+    # the blend makes nearly the same expression: most of the face (above the jaw) within 0.3 mm...
+    above_jaw = composite.model.rig.jaw_weight == 0
+    assert np.median(shape_gap[above_jaw]) < 0.03
     if name == "happy_surprise":
-        # ...the brows exactly (the frontalis come from surprise unchanged), the lip
-        # corners within a millimetre (surprise adds its mouth muscles)
+        # ...the brows within a millimetre (the frontalis come from surprise unchanged;
+        # the open jaw tugs the whole mask a little), but surprise brings its jaw drop,
+        # which the thesis's composite (a jawless face) leaves out
         for v in (105, 334, 70, 300):
-            assert shape_gap[v] < 1e-3
-        assert shape_gap[[61, 291]].max() < 0.1
+            assert shape_gap[v] < 0.1
+        gap = [np.linalg.norm(a.positions[-1, 13] - a.positions[-1, 14]) for a in (composite, blend)]
+        assert gap[0] < 0.1 and gap[1] > 1.0
     else:
+        assert shape_gap.max() < 0.75 * motion.max()
         # ...but disgust is one-sided, so the blend is not symmetric where the composite is
         assert abs(blend.positions[-1][269, 1] - blend.positions[-1][39, 1]) > 0.05
 

@@ -1,0 +1,158 @@
+"""Anatomy beyond the thesis: sphincter muscles, the jaw, the eyelids, head pose and gaze."""
+
+import numpy as np
+import pytest
+import yaml
+
+import facesim
+from conftest import EXPRESSIONS
+from facesim.errors import InputError
+from facesim.mesh import mirror_map
+from facesim.render import BACKGROUND, FaceRenderer, RenderSettings
+from facesim.simulate import run
+from facesim.spec import POSE, activation_table, load_spec, pose_table
+
+LIP_PAIRS = [(13, 14), (82, 87), (81, 178), (80, 88)]
+LIDS = [(159, 145), (386, 374)]
+
+
+def ramp_table(model, frames, **curves):
+    """An activation table with the named columns (muscles or controls) set."""
+    table = np.zeros((frames, len(model.muscles.names)))
+    for name, curve in curves.items():
+        table[:, model.muscles.index(name)] = curve
+    return table
+
+
+def rise(frames, over):
+    return np.minimum(np.arange(1, frames + 1) / over, 1.0)
+
+
+def distance(positions, a, b):
+    return np.linalg.norm(positions[..., a, :] - positions[..., b, :], axis=-1)
+
+
+@pytest.mark.parametrize("names", [["orbicularis_oris"], ["orbicularis_oculi_r", "orbicularis_oculi_l"]])
+def test_a_sphincter_pulls_its_ring_toward_its_centre_and_stays_symmetric(model, mesh, names):
+    table = ramp_table(model, 40, **{n: rise(40, 10) for n in names})
+    positions, *_ = run(model, table, 0.01)  # an inverted triangle would raise
+    final = positions[-1]
+    m = model.muscles
+    for name in names:
+        k = m.index(name)
+        centre = model.rest_position[m.centre_index[m.centre_start[k]:m.centre_start[k + 1]]].mean(axis=0)
+        ring = [v for v in m.ring[k] if not model.pinned[v]]
+        before = np.linalg.norm((model.rest_position[ring] - centre)[:, :2], axis=1)
+        after = np.linalg.norm((final[ring] - centre)[:, :2], axis=1)
+        assert (after < before).mean() >= 0.8, name  # (nearly) every free ring vertex closer to the centre
+        assert (before - after).mean() > 0.05, name
+    d = final - model.rest_position
+    mirrored = d[mirror_map(mesh.vertices, mesh.faces)] * np.array([-1.0, 1.0, 1.0])
+    # a compressed ring keeps creeping (see the closing note of issue 7), which lets
+    # round-off grow a little more than under the linear muscles' 1e-6
+    assert np.abs(d - mirrored).max() <= 1e-5 * np.abs(d).max()
+
+
+def test_the_lips_do_not_pass_through_each_other_under_the_sphincter(model):
+    positions, *_ = run(model, ramp_table(model, 40, orbicularis_oris=rise(40, 10)), 0.01)
+    for upper, lower in LIP_PAIRS:
+        assert np.all(positions[:, upper, 1] > positions[:, lower, 1])
+
+
+def test_a_20_degree_jaw_opening_parts_the_lips_without_inverting_and_closes_again(model):
+    assert np.degrees(model.rig.jaw_max) == pytest.approx(20.0)
+    opening = np.concatenate([rise(40, 20), np.ones(20), 1 - rise(40, 20)])
+    positions, _, inverted, _ = run(model, ramp_table(model, len(opening), jaw=opening), 0.01)
+    gap = distance(positions, 13, 14)
+    rest = distance(model.rest_position, 13, 14)
+    assert inverted.max() == 0
+    assert gap[40:60].min() - rest >= 1.0  # widened by at least 1 cm while open
+    assert gap[-1] < rest + 0.05  # and closed again
+    chin = positions[50, 152] - model.rest_position[152]
+    assert chin[1] < -1.0 and chin[2] < 0  # the chin swings down and back about the hinge
+
+
+def test_a_blink_closes_both_eyes_without_the_lids_crossing_and_opens_them(model):
+    blink = facesim.simulate(load_spec(EXPRESSIONS / "blink.yaml"))
+    assert blink.inverted.max() == 0
+    for upper, lower in LIDS:
+        gap = distance(blink.positions, upper, lower)
+        rest = distance(model.rest_position, upper, lower)
+        assert rest > 0.5 and gap.min() < 0.1
+        assert abs(gap[-1] - rest) < 0.05  # open again
+    pairs = [(u, l) for lid in model.muscles.eyelids for u, l in zip(lid.upper, lid.lower)]
+    for upper, lower in pairs:
+        assert np.all(blink.positions[:, upper, 1] > blink.positions[:, lower, 1])
+
+
+def test_action_units_drive_the_jaw_eyelids_and_sphincters(model, tmp_path):
+    path = tmp_path / "aus.yaml"
+    path.write_text(yaml.safe_dump({"onset": 0, "aus": {"AU26": 1.0, "AU43": "E", "AU6": 0.5, "AU18": 0.4}}))
+    last = dict(zip(model.muscles.names, activation_table(load_spec(path), model.muscles)[-1]))
+    assert last["jaw"] == 0.5 and last["eyelid_l"] == last["eyelid_r"] == 1.0
+    assert last["orbicularis_oculi_l"] == 0.5 and last["orbicularis_oris"] == 0.4
+
+
+def test_pose_tracks_make_a_table_of_angles(tmp_path):
+    path = tmp_path / "pose.yaml"
+    path.write_text(yaml.safe_dump({"frames": 11, "pose": [
+        {"target": "head_yaw", "keys": [[0, 0], [10, 20]], "interpolation": "linear"},
+        {"target": "gaze_pitch", "keys": [[0, -10]]},
+    ]}))
+    table = pose_table(load_spec(path))
+    assert table.shape == (11, len(POSE))
+    assert table[5, POSE.index("head_yaw")] == pytest.approx(10.0)
+    assert np.all(table[:, POSE.index("gaze_pitch")] == -10) and np.all(table[:, POSE.index("head_roll")] == 0)
+
+
+@pytest.mark.parametrize("track, message", [
+    ({"target": "head_spin", "keys": [[0, 10]]}, r"pose -> 0 -> target: Input should be 'head_yaw'"),
+    ({"target": "head_yaw", "keys": [[0, 120]]}, r"pose -> 0 -> keys -> 0 -> 1: Input should be less than or equal to 90"),
+])
+def test_bad_pose_tracks_are_one_line_errors(tmp_path, track, message):
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump({"pose": [track]}))
+    with pytest.raises(InputError, match=message) as info:
+        load_spec(path)
+    assert str(info.value).startswith(str(path)) and "\n" not in str(info.value)
+
+
+@pytest.fixture(scope="module")
+def renderer(model):
+    with FaceRenderer(model.rest_position, model.faces, RenderSettings(160, 160)) as r:
+        yield r
+
+
+def silhouette(image):
+    mask = np.abs(image.astype(int) - (np.array(BACKGROUND[:3]) * 255).astype(int)).sum(axis=2) > 30
+    rows, cols = np.nonzero(mask)
+    return mask, rows.mean(), cols.mean()
+
+
+def test_head_pose_turns_the_rendered_face_as_a_rigid_body(model, renderer):
+    rest = model.rest_position
+    _, row0, col0 = silhouette(renderer.render(rest))
+    mask_yaw, row, col = silhouette(renderer.render(rest, pose=(25, 0, 0, 0, 0)))
+    assert col - col0 > 3  # turned toward the subject's left: image right for the front camera
+    _, row_up, _ = silhouette(renderer.render(rest, pose=(0, 15, 0, 0, 0)))
+    assert row_up < row0 - 2  # chin up: the face rises about the neck
+    mask_roll, *_ = silhouette(renderer.render(rest, pose=(0, 0, 20, 0, 0)))
+    top, bottom = mask_roll[:60], mask_roll[100:]
+    assert np.nonzero(top)[1].mean() - np.nonzero(bottom)[1].mean() > 5  # the crown tilts toward the left shoulder
+    back, *_ = silhouette(renderer.render(rest))
+    assert np.array_equal(back, silhouette(renderer.render(rest, pose=(0, 0, 0, 0, 0)))[0])
+
+
+def test_gaze_turns_the_eyes(model, renderer):
+    def irises(image):
+        """Centroid (row, column) of the blue iris pixels in each half of the picture."""
+        image = image.astype(int)
+        iris = image[..., 2] > image[..., 0] + 15  # skin is red over blue, the iris blue over red
+        return [np.array(np.nonzero(half)).mean(axis=1) for half in (iris[:, :80], iris[:, 80:])]
+
+    rest = model.rest_position
+    straight = irises(renderer.render(rest))
+    for (row, col), (row0, col0) in zip(irises(renderer.render(rest, pose=(0, 0, 0, 25, 0))), straight):
+        assert col - col0 > 2  # both eyes turn toward the subject's left
+    for (row, col), (row0, col0) in zip(irises(renderer.render(rest, pose=(0, 0, 0, 0, 20))), straight):
+        assert row < row0 - 0.3  # and up (the upper lid hides part of the iris)
