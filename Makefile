@@ -45,7 +45,8 @@ mesh: setup $(VENV)/.photo
 THESIS_SPECS := $(addprefix expressions/,$(addsuffix .yaml,happy sad angry fear disgust surprise disgusted_anger happy_surprise))
 
 docs: setup
-	$(BIN)/facesim sheet $(THESIS_SPECS) -o docs/expressions.png --force
+	$(BIN)/facesim sheet $(THESIS_SPECS) $(addprefix expressions/,duchenne_smile.yaml blink.yaml look_left.yaml) \
+		-o docs/expressions.png --columns 4 --force
 	$(BIN)/facesim muscles --plot docs/muscles.png > /dev/null
 	$(BIN)/facesim render expressions/sequence.yaml -o docs/sequence.gif --size 256x256 --fps 25 --force
 	rm -rf out/dataset-docs
