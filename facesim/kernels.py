@@ -55,14 +55,17 @@ def _power(base, exponent):
 
 
 @njit(**NUMBA_OPTIONS)
-def _nonlinear_coefficient(length, rest, k0, exponent):
-    """-(1 + (|X| - d)²)^γ k0 (|X| - d) / |X|: the g of eq. 3.17 (h with ζ)."""
+def _nonlinear_coefficient(length, rest, k0, exponent, unit):
+    """-(1 + ((|X| - d) / u)²)^γ k0 (|X| - d) / |X|: the g of eq. 3.17 (h with ζ). The
+    thesis's stretch is in cm (u = 1); on a finer mesh of the same face u is its edge
+    length relative to the default face's, so the same strain stiffens the same way."""
     stretch = length - rest
-    return -_power(1.0 + stretch * stretch, exponent) * k0 * stretch / max(length, LENGTH_EPS)
+    relative = stretch / unit
+    return -_power(1.0 + relative * relative, exponent) * k0 * stretch / max(length, LENGTH_EPS)
 
 
 @njit(**NUMBA_OPTIONS)
-def _spring_terms(x, xp, spring_indices, spring_rest_length, k0, gamma, stiff, pull):
+def _spring_terms(x, xp, spring_indices, spring_rest_length, k0, gamma, unit, stiff, pull):
     """Springs on the mesh edges, eq. 3.6, evaluated at the predicted positions xp."""
     for s in range(spring_indices.shape[0]):
         i = spring_indices[s, 0]
@@ -70,7 +73,7 @@ def _spring_terms(x, xp, spring_indices, spring_rest_length, k0, gamma, stiff, p
         dx = xp[i, 0] - xp[j, 0]
         dy = xp[i, 1] - xp[j, 1]
         dz = xp[i, 2] - xp[j, 2]
-        g = _nonlinear_coefficient(math.sqrt(dx * dx + dy * dy + dz * dz), spring_rest_length[s], k0, gamma)
+        g = _nonlinear_coefficient(math.sqrt(dx * dx + dy * dy + dz * dz), spring_rest_length[s], k0, gamma, unit)
         stiff[i] += g
         stiff[j] += g
         for d in range(3):
@@ -109,7 +112,7 @@ def _foot_on_edge(xp, i, a, b, out):
 
 
 @njit(**NUMBA_OPTIONS)
-def _repulsion_terms(x, xp, repulsion_vertex, repulsion_edge, repulsion_rest_distance, k0, zeta, stiff, pull):
+def _repulsion_terms(x, xp, repulsion_vertex, repulsion_edge, repulsion_rest_distance, k0, zeta, unit, stiff, pull):
     """Edge repulsion, eq. 3.7: each vertex is held at its rest altitude above the
     opposite edge of each of its triangles.
 
@@ -128,7 +131,7 @@ def _repulsion_terms(x, xp, repulsion_vertex, repulsion_edge, repulsion_rest_dis
         dx = xp[i, 0] - foot[0]
         dy = xp[i, 1] - foot[1]
         dz = xp[i, 2] - foot[2]
-        h = _nonlinear_coefficient(math.sqrt(dx * dx + dy * dy + dz * dz), repulsion_rest_distance[r], k0, zeta)
+        h = _nonlinear_coefficient(math.sqrt(dx * dx + dy * dy + dz * dz), repulsion_rest_distance[r], k0, zeta, unit)
         stiff[i] += h
         pull[i, 0] += h * (x[i, 0] - foot[0])
         pull[i, 1] += h * (x[i, 1] - foot[1])
@@ -480,8 +483,8 @@ def _simulate(
     muscle_kind, muscle_axes, muscle_insertion, muscle_centre_start, muscle_centre_index, muscle_cos_zone, muscle_r,
     muscle_r_max, muscle_force, axis_x, axis_z, radius, rest_position,
     jaw_column, jaw_weight, jaw_hinge, jaw_axis, jaw_max, lid_column, lid_centre, lid_delta, drive_column,
-    drive_weight, contact_upper, contact_lower, contact_gap, mass, damping, k0, gamma, zeta, tissue, drive, edge_repulsion, uv_projection,
-    activations, dt, substeps, energy_limit, stop_on_inversion,
+    drive_weight, contact_upper, contact_lower, contact_gap, mass, damping, k0, gamma, zeta, length_unit, tissue, drive,
+    edge_repulsion, uv_projection, activations, dt, substeps, energy_limit, stop_on_inversion,
     x, v, positions, kinetic_energy, inverted, smallest_area,
 ):
     """Algorithm 3.4.1: ``substeps`` steps of Δt / substeps per frame, for every row of
@@ -536,10 +539,11 @@ def _simulate(
             stiff[:] = 0.0
             pull[:] = 0.0
             force[:] = 0.0
-            _spring_terms(x, xp, spring_indices, spring_rest_length, k0, gamma, stiff, pull)
+            _spring_terms(x, xp, spring_indices, spring_rest_length, k0, gamma, length_unit, stiff, pull)
             _tissue_terms(x, target, tissue, hold, stiff, pull)
             if edge_repulsion:
-                _repulsion_terms(x, xp, repulsion_vertex, repulsion_edge, repulsion_rest_distance, k0, zeta, stiff, pull)
+                _repulsion_terms(x, xp, repulsion_vertex, repulsion_edge, repulsion_rest_distance, k0, zeta, length_unit,
+                                 stiff, pull)
             if uv_projection:
                 _project_uv(xp, axis_x, axis_z, radius, frame)
             else:

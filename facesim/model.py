@@ -10,6 +10,19 @@ projection is switched off). Per-step state (positions, velocities) lives elsewh
 
 The 2D projection needs the head's vertical axis and a radius to turn the angle u into a
 length: both come from a cylinder fitted to the mesh, so no face needs them by hand.
+
+One material fits any mesh of a face. What depends on the size of the face is already
+relative: muscle falloffs are in muscle lengths, spring rest lengths and edge-repulsion
+altitudes are the mesh's own, the projection's radius is fitted. What depends on the
+mesh's *resolution* is scaled by s, the skin area per vertex relative to the default
+face's (``REFERENCE_VERTEX_AREA``; s = 1 there, about 1/4 on a face Loop-subdivided
+once): each vertex stands for s times the default's tissue, so its mass, damping,
+hypodermis and drive springs and the muscle force it receives are multiplied by s, which
+keeps the force per area and the mass per area of the skin; the springs keep k0 (a
+triangular spring lattice's sheet stiffness does not depend on its edge length); the
+non-linearity of eq. 3.6 and 3.7 reads the stretch in units of √s (the edge length
+relative to the default's); and the sub-steps grow as 1/√s, since the lighter vertices on
+the same springs oscillate √(1/s) times faster.
 """
 
 from __future__ import annotations
@@ -24,6 +37,10 @@ from .mesh import FaceMesh, csr_from_pairs
 from .muscles import SPHINCTER, MuscleSet
 from .rig import Rig, build_rig
 from .schema import Strict
+
+#: The default face's skin area per vertex (cm²): meshes/face.obj's 276.05 cm² over 468
+#: vertices. A mesh's resolution scale s is its own area per vertex over this.
+REFERENCE_VERTEX_AREA = 0.5898477858884484
 
 
 class Material(Strict):
@@ -79,6 +96,8 @@ class Model:
     muscles: MuscleSet
     rig: Rig
     scale: float  # bounding-box diagonal of the face, cm
+    resolution: float = 1.0  # s: skin area per vertex over the default face's (module docstring)
+    length_unit: float = 1.0  # √s: the unit of stretch in the non-linear springs
 
     @property
     def vertex_count(self) -> int:
@@ -98,7 +117,7 @@ class Model:
             self.muscle_axes, self.muscle_insertion, self.muscle_centre_start, self.muscle_centre_index,
             self.muscle_cos_zone, self.muscle_r, self.muscle_r_max, self.muscle_force, self.axis_x, self.axis_z,
             self.radius, self.rest_position, *self.rig.arrays(),
-            m.mass, m.damping, m.stiffness, m.nonlinearity, m.repulsion_nonlinearity, m.tissue, m.drive,
+            m.mass, m.damping, m.stiffness, m.nonlinearity, m.repulsion_nonlinearity, self.length_unit, m.tissue, m.drive,
             m.edge_repulsion, m.uv_projection,
         )
 
@@ -119,7 +138,18 @@ def project_uv(points: np.ndarray, axis_x: float, axis_z: float, radius: float) 
     return frame
 
 
+def resolved_material(material: Material, resolution: float) -> Material:
+    """The material per vertex on a mesh of resolution scale s (module docstring)."""
+    s = resolution
+    return material.model_copy(update=dict(
+        mass=material.mass * s, damping=material.damping * s, tissue=material.tissue * s, drive=material.drive * s,
+        substeps=max(material.substeps, round(material.substeps / np.sqrt(s))),
+    ))
+
+
 def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Material()) -> Model:
+    """The model of a face; ``material`` is per vertex of the default face and is scaled to
+    this mesh's resolution (``Model.material`` is the scaled one)."""
     x = mesh.vertices
     faces = mesh.faces
     edges = mesh.edges
@@ -139,6 +169,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
     pinned[muscles.pinned] = True
 
     axis_x, axis_z, radius = mesh.vertical_axis
+    resolution = float(mesh.face_areas.sum() / n / REFERENCE_VERTEX_AREA)
     from .kernels import _muscle_geometry
 
     origin, insertion = np.empty((muscles.count, 3)), np.empty((muscles.count, 3))
@@ -179,12 +210,12 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         muscle_cos_zone=np.cos(muscles.zone),
         muscle_r=muscles.falloff[:, 0] * length,
         muscle_r_max=muscles.falloff[:, 1] * length,
-        muscle_force=muscles.force,
+        muscle_force=muscles.force * resolution,
     )
     return Model(
         **{key: _frozen(value) for key, value in arrays.items()},
-        axis_x=axis_x, axis_z=axis_z, radius=radius, material=material, muscles=muscles, rig=build_rig(mesh, muscles),
-        scale=mesh.scale,
+        axis_x=axis_x, axis_z=axis_z, radius=radius, material=resolved_material(material, resolution), muscles=muscles,
+        rig=build_rig(mesh, muscles), scale=mesh.scale, resolution=resolution, length_unit=float(np.sqrt(resolution)),
     )
 
 

@@ -350,7 +350,7 @@ def muscles_as_points(spec: MuscleFile, mesh: FaceMesh) -> MuscleFile:
 
     muscles = [m.model_copy(update={"attachment": point(m.attachment), "insertion": point(m.insertion)})
                if m.kind == "linear" else carried(m, "centre", "ring") for m in spec.muscles]
-    jaw = spec.jaw and carried(spec.jaw, "hinge", "lower", "upper")
+    jaw = spec.jaw and carried(spec.jaw, "lower", "upper").model_copy(update={"hinge": tuple(point(p) for p in spec.jaw.hinge)})
     return spec.model_copy(update={
         "muscles": muscles, "jaw": jaw, "eyelids": [carried(e, "upper", "lower") for e in spec.eyelids],
         "pinned": spec.pinned.model_copy(update={"vertices": []}),

@@ -11,16 +11,16 @@ from scipy.sparse.csgraph import connected_components
 from facesim.config import NEGLIGIBLE_DELTA
 
 
-def nonlinear(length, rest, k0, exponent):
-    """g (or h) of eq. 3.17."""
+def nonlinear(length, rest, k0, exponent, unit=1.0):
+    """g (or h) of eq. 3.17, the stretch read in units of ``unit`` inside the power."""
     stretch = length - rest
-    return -((1 + stretch**2) ** exponent) * k0 * stretch / length
+    return -((1 + (stretch / unit) ** 2) ** exponent) * k0 * stretch / length
 
 
-def spring_terms(x, xp, springs, rest, k0, gamma):
+def spring_terms(x, xp, springs, rest, k0, gamma, unit=1.0):
     """Σ_j g_ij and Σ_j g_ij (X_i - X_j*) per vertex (eq. 3.6, 3.17)."""
     i, j = springs[:, 0], springs[:, 1]
-    g = nonlinear(np.linalg.norm(xp[i] - xp[j], axis=1), rest, k0, gamma)
+    g = nonlinear(np.linalg.norm(xp[i] - xp[j], axis=1), rest, k0, gamma, unit)
     stiff = np.zeros(len(x))
     pull = np.zeros_like(x)
     np.add.at(stiff, i, g)
@@ -30,14 +30,14 @@ def spring_terms(x, xp, springs, rest, k0, gamma):
     return stiff, pull
 
 
-def repulsion_terms(x, xp, vertex, edge, rest, k0, zeta):
+def repulsion_terms(x, xp, vertex, edge, rest, k0, zeta, unit=1.0):
     """Σ_k h_ik and Σ_k h_ik (X_i - P_k*) per vertex (eq. 3.7, 3.17), plus the reactions
     -R_ik on the edge ends split by the foot's position."""
     a, b = xp[edge[:, 0]], xp[edge[:, 1]]
     e = b - a
     t = ((xp[vertex] - a) * e).sum(1) / (e * e).sum(1)
     foot = a + t[:, None] * e
-    h = nonlinear(np.linalg.norm(xp[vertex] - foot, axis=1), rest, k0, zeta)
+    h = nonlinear(np.linalg.norm(xp[vertex] - foot, axis=1), rest, k0, zeta, unit)
     stiff = np.zeros(len(x))
     pull = np.zeros_like(x)
     np.add.at(stiff, vertex, h)
@@ -153,12 +153,13 @@ def step(model, x, v, activation, h):
     mat = model.material
     free = ~model.pinned
     xp = np.where(free[:, None], x + h * v, x)
-    stiff, pull = spring_terms(x, xp, model.spring_indices, model.spring_rest_length, mat.stiffness, mat.nonlinearity)
+    unit = model.length_unit
+    stiff, pull = spring_terms(x, xp, model.spring_indices, model.spring_rest_length, mat.stiffness, mat.nonlinearity, unit)
     s, p = tissue_terms(x, model.rest_position, mat.tissue)
     stiff, pull = stiff + s, pull + p
     if mat.edge_repulsion:
         s, p = repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance,
-                               mat.stiffness, mat.repulsion_nonlinearity)
+                               mat.stiffness, mat.repulsion_nonlinearity, unit)
         stiff, pull = stiff + s, pull + p
     force = muscle_forces(model, xp, activation)
     denominator = np.maximum(mat.mass + h * mat.damping - h * h * stiff, mat.mass)

@@ -24,12 +24,14 @@ def assert_close(actual, expected, rtol=RTOL):
     assert np.abs(actual - expected).max() <= rtol * scale
 
 
-def test_springs_match_reference(model, rng):
+@pytest.mark.parametrize("unit", [1.0, 0.5])
+def test_springs_match_reference(model, rng, unit):
     x, xp = perturbed(model, rng)
     m = model.material
     stiff, pull = np.zeros(len(x)), np.zeros_like(x)
-    K._spring_terms(x, xp, model.spring_indices, model.spring_rest_length, m.stiffness, m.nonlinearity, stiff, pull)
-    ref_stiff, ref_pull = naive.spring_terms(x, xp, model.spring_indices, model.spring_rest_length, m.stiffness, m.nonlinearity)
+    K._spring_terms(x, xp, model.spring_indices, model.spring_rest_length, m.stiffness, m.nonlinearity, unit, stiff, pull)
+    ref_stiff, ref_pull = naive.spring_terms(x, xp, model.spring_indices, model.spring_rest_length, m.stiffness,
+                                             m.nonlinearity, unit)
     assert_close(stiff, ref_stiff)
     assert_close(pull, ref_pull)
 
@@ -39,7 +41,8 @@ def test_edge_repulsion_matches_reference(model, rng, zeta):
     x, xp = perturbed(model, rng)
     k0 = model.material.stiffness
     stiff, pull = np.zeros(len(x)), np.zeros_like(x)
-    K._repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance, k0, zeta, stiff, pull)
+    K._repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance, k0, zeta, 1.0,
+                       stiff, pull)
     ref_stiff, ref_pull = naive.repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge,
                                                 model.repulsion_rest_distance, k0, zeta)
     assert_close(stiff, ref_stiff)
@@ -49,7 +52,8 @@ def test_edge_repulsion_matches_reference(model, rng, zeta):
 def test_edge_repulsion_is_zero_at_rest(model):
     x = model.rest_position.copy()
     stiff, pull = np.zeros(len(x)), np.zeros_like(x)
-    K._repulsion_terms(x, x, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance, 1000.0, 5.0, stiff, pull)
+    K._repulsion_terms(x, x, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance, 1000.0, 5.0, 1.0,
+                       stiff, pull)
     assert np.abs(pull).max() < 1e-9
 
 
