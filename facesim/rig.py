@@ -132,13 +132,23 @@ def _jaw(mesh: FaceMesh, muscles: MuscleSet):
     axis = axis / np.linalg.norm(axis) * np.sign(axis[0] or 1.0)
     below = x[:, 1] < hinge[:, 1].mean()
     rim = mesh.boundary_loops[0] if mesh.boundary_loops else np.zeros(0, dtype=np.int64)
-    # The lips part as a wedge: toward each mouth corner (the opening's vertices in neither
-    # list, with any vertex all but touching them) their weights meet half way, or the
-    # tissue at the corner folds over.
-    lips = np.concatenate([jaw.lower, jaw.upper])
+    # The mouth opening's two arcs between its corners (its leftmost and rightmost
+    # vertices) are the lower lip, which holds the listed lower points, and the upper lip;
+    # a finer mesh has more vertices on them than the muscle file lists.
+    lower, upper, corners = jaw.lower, jaw.upper, np.zeros(0, dtype=np.int64)
     mouth = [loop for loop in mesh.boundary_loops[1:] if np.isin(jaw.lower, loop).any()]
-    corners = np.setdiff1d(mouth[0], lips) if mouth else np.zeros(0, dtype=np.int64)
-    lip_weight = np.isin(lips, jaw.lower).astype(float)
+    if mouth:
+        loop = mouth[0]
+        ends = sorted([int(np.argmin(x[loop, 0])), int(np.argmax(x[loop, 0]))])
+        arcs = loop[ends[0] + 1:ends[1]], np.concatenate([loop[ends[1] + 1:], loop[:ends[0]]])
+        lower_first = np.isin(jaw.lower, arcs[0]).sum() >= np.isin(jaw.lower, arcs[1]).sum()
+        lower = np.union1d(jaw.lower, arcs[0 if lower_first else 1])
+        upper = np.union1d(jaw.upper, arcs[1 if lower_first else 0])
+        corners = loop[ends]
+    # The lips part as a wedge: toward each corner (with any vertex all but touching it)
+    # their weights meet half way, or the tissue at the corner folds over.
+    lips = np.concatenate([lower, upper])
+    lip_weight = np.isin(lips, lower).astype(float)
     if len(corners):
         width = np.ptp(x[mouth[0], 0])
         near = np.linalg.norm(x[:, None] - x[None, corners], axis=2).min(axis=1) < JAW_CORNER_SIZE * width
