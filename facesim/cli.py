@@ -261,12 +261,16 @@ def sheet(
     backend: str = BACKEND,
     force: bool = FORCE,
     columns: int = typer.Option(3, "--columns"),
+    mesh: Optional[Path] = MESH,
+    muscles: Optional[Path] = MUSCLES,
 ):
     """Every expression at its apex in a labelled grid, the neutral face first: the last
-    frame of an expression that eases in and holds, the strongest of a sequence."""
+    frame of an expression that eases in and holds, the strongest of a sequence. An
+    expression that fails to simulate gets an empty cell saying where, and exit code 1."""
     from .batch import collect_specs
+    from .errors import SimulationError
     from .plots import contact_sheet
-    from .render import FaceRenderer
+    from .render import BACKGROUND, FaceRenderer
     from .simulate import simulate
     from .spec import load_spec
 
@@ -276,14 +280,29 @@ def sheet(
     if output.exists() and not force:
         raise InputError(f"{output}: already exists (use --force to overwrite)")
     order = {name: k for k, name in enumerate(THESIS_ORDER)}
-    specs = sorted((load_spec(p) for p in collect_specs(inputs)), key=lambda s: (order.get(s.title, len(order)), s.title))
-    animations = [simulate(s) for s in specs]
-    first = animations[0]
+    specs = sorted((load_spec(p).with_overrides(mesh=mesh, muscles=muscles) for p in collect_specs(inputs)),
+                   key=lambda s: (order.get(s.title, len(order)), s.title))
+    results, failures = [], []
+    for spec in specs:
+        try:
+            results.append((spec.title, simulate(spec)))
+        except SimulationError as exc:
+            results.append((f"{spec.title} (fails at frame {exc.frame})", None))
+            failures.append(str(exc))
+    done = [a for _, a in results if a is not None]
+    if not done:
+        raise SimulationError(failures[0])
+    first = done[0]
     settings = settings_from(size, "front")
+    blank = np.full((settings.height, settings.width, 3), np.array(BACKGROUND[:3]) * 255, dtype=np.uint8)
     images, labels = [], ["neutral"]
     with FaceRenderer(first.rest, first.faces, settings, backend) as renderer:
         images.append(renderer.render(first.rest))
-        for a in animations:
+        for title, a in results:
+            labels.append(title.replace("_", " "))
+            if a is None:
+                images.append(blank)
+                continue
             same_mesh = a.rest.shape == first.rest.shape and (a.rest == first.rest).all()
             apex = apex_frame(a)
             if same_mesh:
@@ -291,10 +310,13 @@ def sheet(
             else:
                 with FaceRenderer(a.rest, a.faces, settings, backend) as own:
                     images.append(own.render(a.positions[apex], pose=a.pose_at(apex)))
-            labels.append(a.name.replace("_", " "))
     output.parent.mkdir(parents=True, exist_ok=True)
     contact_sheet(images, labels, output, columns)
     typer.echo(f"wrote {output}: {len(images)} faces", err=True)
+    for failure in failures:
+        typer.echo(failure, err=True)
+    if failures:
+        raise typer.Exit(1)
 
 
 @app.command()
@@ -345,13 +367,84 @@ def mesh_info(mesh: Path = typer.Argument(..., help="a mesh file (OBJ, PLY, GLB,
     typer.echo(f"size: {extent[0]:.2f} x {extent[1]:.2f} x {extent[2]:.2f} (x, y, z)")
     same_topology = face.vertex_count == default.vertex_count and np.array_equal(face.edges, default.edges)
     typer.echo("muscles: " + (f"{DEFAULT_MUSCLES} fits by landmark index (MediaPipe topology)" if same_topology else
-                              "another topology: give muscles as 3D points in the face frame, snapped to its vertices"))
+                              "another topology: name landmarks (`facesim mesh landmarks`), then `facesim mesh align` "
+                              "writes it in the face frame with the muscles carried by position"))
     problems = diagnose(face)
     for problem in problems:
         typer.echo(f"problem: {problem}")
     if problems:
         raise typer.Exit(1)
     typer.echo("ok: usable as a facesim face")
+
+
+@mesh_app.command("landmarks")
+@handled
+def mesh_landmarks(
+    mesh: Path = typer.Argument(..., help="a mesh roughly upright (+y) and facing +z, in any units"),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="write the proposal as YAML to edit"),
+    force: bool = FORCE,
+):
+    """Propose the named landmarks of a mesh of another topology by nearest vertex, for
+    `facesim mesh align`. Check them: a wrong one skews the alignment."""
+    import yaml
+    from rich.console import Console
+    from rich.table import Table
+
+    from .align import propose_landmarks
+    from .config import DEFAULT_MESH
+    from .mesh import load_mesh
+    from .writers import atomic_path
+
+    if output and output.exists() and not force:
+        raise InputError(f"{output}: already exists (use --force to overwrite)")
+    proposal = propose_landmarks(load_mesh(mesh), load_mesh(DEFAULT_MESH))
+    table = Table(title=f"landmarks of {mesh} (distance after matching bounding boxes, cm of the default face)")
+    for column in ("landmark", "vertex", "distance"):
+        table.add_column(column)
+    for name, (vertex, distance) in proposal.items():
+        table.add_row(name, str(vertex), f"{distance:.2f}")
+    Console(width=100).print(table)
+    if output:
+        with atomic_path(output) as tmp:
+            tmp.write_text(yaml.safe_dump({name: vertex for name, (vertex, _) in proposal.items()}, sort_keys=False))
+        typer.echo(f"wrote {output}", err=True)
+
+
+@mesh_app.command("align")
+@handled
+def mesh_align(
+    mesh: Path = typer.Argument(..., help="a mesh file of any topology (OBJ, PLY, GLB, ...)"),
+    landmarks: Path = typer.Option(..., "--landmarks", help="YAML: landmark name -> vertex index or [x, y, z]"),
+    output: Path = typer.Option(..., "-o", "--output", help="OBJ to write, in the default face's frame (cm)"),
+    muscles_out: Optional[Path] = typer.Option(None, "--muscles-out", help="muscle file to write (default: OUTPUT with .muscles.yaml)"),
+    force: bool = FORCE,
+):
+    """Move, turn and scale a mesh onto the default face by named landmarks (a similarity
+    fit) and write it with the default muscle file carried to it by position."""
+    import yaml
+
+    from .align import align, load_landmarks
+    from .config import DEFAULT_MESH, DEFAULT_MUSCLES
+    from .mesh import load_mesh, write_obj
+    from .muscles import MuscleFile, load_muscles, muscles_as_points
+    from .schema import load_model
+    from .writers import atomic_path
+
+    muscles_out = muscles_out or output.with_suffix("").with_suffix(".muscles.yaml")
+    for path in (output, muscles_out):
+        if path.exists() and not force:
+            raise InputError(f"{path}: already exists (use --force to overwrite)")
+    face = load_mesh(mesh)
+    default = load_mesh(DEFAULT_MESH)
+    aligned, residual = align(face, load_landmarks(landmarks, face), default)
+    carried = muscles_as_points(load_model(DEFAULT_MUSCLES, MuscleFile), default)
+    write_obj(output, aligned, header=f"{mesh} aligned to the default face by {landmarks}")
+    with atomic_path(muscles_out) as tmp:
+        tmp.write_text(f"# The default muscles carried by position to {output.name}.\n"
+                       + yaml.safe_dump(carried.model_dump(mode="json"), sort_keys=False))
+    resolved = load_muscles(muscles_out, load_mesh(output))  # every muscle snaps, or a one-line error
+    typer.echo(f"wrote {output} and {muscles_out}: {resolved.count} muscles; landmark residuals "
+               f"median {np.median(residual):.2f} cm, largest {residual.max():.2f} cm", err=True)
 
 
 @mesh_app.command("from-photo")

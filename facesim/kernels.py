@@ -513,6 +513,7 @@ def _simulate(
     _muscle_geometry(target, muscle_kind, muscle_insertion, muscle_centre_start, muscle_centre_index,
                      axis_x, axis_z, radius, uv_projection, origin, insertion_point)
     rigged = jaw_column >= 0 or lid_column.max() >= 0
+    at_rest = True  # the targets are the rest positions: nothing to recompute while the controls stay at 0
     visited = np.zeros(n, dtype=np.int64)
     stack = np.empty(n, dtype=np.int64)
     region = np.empty(n, dtype=np.int64)
@@ -520,11 +521,15 @@ def _simulate(
     stamp = 0
     for f in range(activations.shape[0]):
         for s in range(substeps):
+            moving = False
             if rigged:
                 blend = (s + 1.0) / substeps
-                for c in range(controls.shape[0]):
+                for c in range(muscle_kind.shape[0], controls.shape[0]):
                     previous = activations[f - 1, c] if f > 0 else 0.0
                     controls[c] = previous + blend * (activations[f, c] - previous)
+                    moving = moving or controls[c] != 0.0 or previous != 0.0
+            if moving or not at_rest:
+                at_rest = not moving
                 _rig_targets(rest_position, controls, jaw_column, jaw_weight, jaw_hinge, jaw_axis, jaw_max, lid_column,
                              lid_centre, lid_delta, drive_column, drive_weight, drive, target, hold)
                 _muscle_geometry(target, muscle_kind, muscle_insertion, muscle_centre_start, muscle_centre_index,

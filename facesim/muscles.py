@@ -216,12 +216,17 @@ class MuscleSet:
         return self.names.index(name)
 
 
-def _snap(point: Point, mesh: FaceMesh, where: str) -> int:
+def _snap(point: Point, mesh: FaceMesh, where: str, below: int | None = None) -> int:
+    """A landmark index checked, or the vertex nearest a 3D point; with ``below``, the
+    nearest of the vertices lower than that one (a lower lip or lid under its partner,
+    which on a mesh of another topology may be the nearer vertex to both points)."""
     if isinstance(point, int):
         if not 0 <= point < mesh.vertex_count:
             raise InputError(f"{where}: vertex {point} does not exist (mesh has {mesh.vertex_count})")
         return point
     distance = np.linalg.norm(mesh.vertices - np.asarray(point), axis=1)
+    if below is not None:
+        distance[mesh.vertices[:, 1] >= mesh.vertices[below, 1]] = np.inf
     nearest = int(np.argmin(distance))
     if distance[nearest] > SNAP_FRACTION * mesh.scale:
         raise InputError(f"{where}: point {list(point)} is {distance[nearest]:.2f} cm from the surface")
@@ -299,8 +304,8 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
                           for p in spec.jaw.hinge], dtype=np.float64)  # a point may lie inside the head
         if np.linalg.norm(hinge[1] - hinge[0]) < 0.1 * width:
             raise InputError(f"{where}: hinge: its two points must lie on either side of the face")
-        lower = np.array([_snap(p, mesh, f"{where}: lower") for p in spec.jaw.lower], dtype=np.int64)
         upper = np.array([_snap(p, mesh, f"{where}: upper") for p in spec.jaw.upper], dtype=np.int64)
+        lower = np.array([_snap(p, mesh, f"{where}: lower", below=u) for p, u in zip(spec.jaw.lower, upper)], dtype=np.int64)
         _upper_over_lower(mesh, upper, lower, where)
         jaw = JawRig(hinge, lower, upper, float(np.radians(spec.jaw.max_angle)))
         controls.append("jaw")
@@ -308,7 +313,7 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
     for lid in spec.eyelids:
         where = f"{source}: eyelid {lid.name}"
         upper = np.array([_snap(p, mesh, f"{where}: upper") for p in lid.upper], dtype=np.int64)
-        lower = np.array([_snap(p, mesh, f"{where}: lower") for p in lid.lower], dtype=np.int64)
+        lower = np.array([_snap(p, mesh, f"{where}: lower", below=u) for p, u in zip(lid.lower, upper)], dtype=np.int64)
         middle = mesh.vertices[np.concatenate([upper, lower])].mean(axis=0)
         _check_side(lid.name, (middle[0], middle[0]), width, where)
         _upper_over_lower(mesh, upper, lower, where)

@@ -56,3 +56,60 @@ def test_a_subdivided_face_moves_like_the_default_one(subdivided, name):
         a = coarse.positions[-1, corner] - coarse.rest[corner]
         b = fine.positions[-1, corner] - fine.rest[corner]
         assert np.linalg.norm(a - b) < 0.2 * np.linalg.norm(a)
+
+
+def turned(points, degrees_yaw=25.0, degrees_pitch=10.0, scale=10.0, shift=(3.0, -40.0, 12.0)):
+    """A similarity transform of points (a scan in millimetres, turned and moved)."""
+    a, b = np.radians([degrees_yaw, degrees_pitch])
+    yaw = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    pitch = np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+    return points @ (yaw @ pitch).T * scale + np.array(shift)
+
+
+def test_align_brings_a_turned_scan_in_millimetres_into_the_face_frame(tmp_path, subdivided):
+    from facesim.align import NAMED_LANDMARKS
+    from facesim.mesh import FaceMesh
+    from test_cli import facesim as cli
+
+    fine = load_mesh(subdivided[0])
+    scan = tmp_path / "scan.obj"
+    write_obj(scan, FaceMesh(turned(fine.vertices), fine.faces))
+    # Loop subdivision keeps the original vertices first: the landmarks keep their indices
+    (tmp_path / "landmarks.yaml").write_text(yaml.safe_dump({n: i for n, i in NAMED_LANDMARKS.items()}))
+    cli("mesh", "align", scan, "--landmarks", tmp_path / "landmarks.yaml", "-o", tmp_path / "aligned.obj", check=0)
+    aligned = load_mesh(tmp_path / "aligned.obj")
+    assert np.abs(aligned.vertices - fine.vertices).max() < 0.1  # back in cm, upright, facing +z
+    carried = load_model(tmp_path / "aligned.muscles.yaml", MuscleFile)
+    from facesim.muscles import resolve_muscles
+
+    on_aligned = resolve_muscles(carried, aligned)
+    on_fine = resolve_muscles(load_model(subdivided[1], MuscleFile), fine)
+    assert np.array_equal(on_aligned.attachment, on_fine.attachment)
+    assert np.array_equal(on_aligned.insertion, on_fine.insertion)
+
+
+def test_landmarks_are_proposed_by_nearest_vertex_on_an_upright_mesh(tmp_path, subdivided):
+    from facesim.align import NAMED_LANDMARKS, propose_landmarks
+    from facesim.mesh import FaceMesh
+
+    fine = load_mesh(subdivided[0])
+    scan = FaceMesh(turned(fine.vertices, 0.0, 0.0), fine.faces)  # millimetres, moved, but upright
+    proposal = propose_landmarks(scan, load_mesh(DEFAULT_MESH))
+    found = [proposal[n][0] == i for n, i in NAMED_LANDMARKS.items()]
+    assert np.mean(found) >= 0.75
+
+
+@pytest.mark.parametrize("landmarks, message", [
+    ({"nose_tip": 4, "chin": 152}, "name at least 4 landmarks, got 2"),
+    ({"nose_tip": 4, "chin": 152, "eye_outer_r": 33, "ear": 5}, "ear: unknown landmark"),
+    ({"nose_tip": 4, "chin": 152, "eye_outer_r": 33, "eye_outer_l": 99999}, "eye_outer_l: vertex 99999 does not exist"),
+    ({"nose_tip": 4, "chin": 152, "eye_outer_r": 33, "eye_outer_l": "left"}, "eye_outer_l: expected a vertex index or"),
+])
+def test_bad_landmark_files_are_one_line_errors(tmp_path, landmarks, message):
+    from test_cli import facesim as cli
+
+    path = tmp_path / "landmarks.yaml"
+    path.write_text(yaml.safe_dump(landmarks))
+    result = cli("mesh", "align", DEFAULT_MESH, "--landmarks", path, "-o", tmp_path / "out.obj")
+    assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr
+    assert result.stderr.strip().count("\n") == 0 and not (tmp_path / "out.obj").exists()
