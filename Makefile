@@ -44,11 +44,16 @@ mesh: setup $(VENV)/.photo
 
 THESIS_SPECS := $(addprefix expressions/,$(addsuffix .yaml,happy sad angry fear disgust surprise disgusted_anger happy_surprise))
 
-docs: setup
+docs: setup $(VENV)/.photo
 	$(BIN)/facesim sheet $(THESIS_SPECS) $(addprefix expressions/,duchenne_smile.yaml blink.yaml look_left.yaml) \
 		-o docs/expressions.png --columns 4 --force
 	$(BIN)/facesim muscles --plot docs/muscles.png > /dev/null
 	$(BIN)/facesim render expressions/sequence.yaml -o docs/sequence.gif --size 256x256 --fps 25 --force
+	mkdir -p out
+	$(BIN)/python -c "import imageio.v3 as iio; from skimage import data; iio.imwrite('out/astronaut.png', data.astronaut())"
+	$(BIN)/facesim mesh from-photo out/astronaut.png -o out/astronaut.obj --force
+	# a second face; a spec that fails there gets an empty cell naming the frame, and exit 1
+	-$(BIN)/facesim sheet $(THESIS_SPECS) --mesh out/astronaut.obj -o docs/astronaut.png --size 320x320 --force
 	rm -rf out/dataset-docs
 	$(BIN)/facesim dataset --n 12 --seed 3 --jitter --size 192x192 -o out/dataset-docs --sheet docs/dataset.png
 

@@ -239,8 +239,9 @@ class FaceRenderer:
         if mouth is not None:
             points = rest[mouth]
             cavity = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
-            cavity.apply_scale([0.55 * np.ptp(points[:, 0]), 1.2, 1.0])
-            cavity.apply_translation(points.mean(axis=0) - np.array([0.0, 0.0, 1.1]))
+            # deep and tall enough to fill the opening when the jaw drops (facesim.rig)
+            cavity.apply_scale([0.6 * np.ptp(points[:, 0]), 2.4, 1.0])
+            cavity.apply_translation(points.mean(axis=0) - np.array([0.0, 0.9, 1.9]))
             material = pyrender.MetallicRoughnessMaterial(baseColorFactor=MOUTH, metallicFactor=0.0, roughnessFactor=1.0)
             scene.add(pyrender.Mesh.from_trimesh(cavity, material=material, smooth=True), parent_node=self._head)
 

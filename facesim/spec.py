@@ -214,7 +214,11 @@ class Spec(Strict):
         return self._relative(self.muscles, DEFAULT_MUSCLES)
 
     def with_overrides(self, **changes) -> "Spec":
-        """A copy with fields replaced (used by the CLI's --mesh, --muscles)."""
+        """A copy with fields replaced (used by the CLI's --mesh, --muscles). A mesh or
+        muscle path given here is relative to the working directory, not to the spec."""
+        for key in ("mesh", "muscles"):
+            if changes.get(key) is not None:
+                changes[key] = Path(changes[key]).resolve()
         spec = self.model_copy(update={k: v for k, v in changes.items() if v is not None})
         spec._source = self._source
         return spec
