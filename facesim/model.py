@@ -67,6 +67,7 @@ class Model:
     faces: np.ndarray  # (t, 3)
     rest_normal: np.ndarray  # (t, 3) unit
     rest_area: np.ndarray  # (t,)
+    rest_against: np.ndarray  # (t,) bool: faces against the skin around it at rest (kernels._against_surroundings)
     pinned: np.ndarray  # (n,) bool
     neighbour_start: np.ndarray  # (n+1,)
     neighbour_index: np.ndarray  # (2s,)
@@ -111,7 +112,7 @@ class Model:
         """The model's arrays in the order ``kernels._simulate`` takes them."""
         m = self.material
         return (
-            self.faces, self.rest_normal, self.rest_area, self.pinned, self.neighbour_start, self.neighbour_index,
+            self.faces, self.rest_normal, self.rest_area, self.rest_against, self.pinned, self.neighbour_start, self.neighbour_index,
             self.ring_start, self.ring_a, self.ring_b, self.spring_indices, self.spring_rest_length,
             self.repulsion_vertex, self.repulsion_edge, self.repulsion_rest_distance, self.muscle_kind,
             self.muscle_axes, self.muscle_insertion, self.muscle_centre_start, self.muscle_centre_index,
@@ -136,6 +137,17 @@ def project_uv(points: np.ndarray, axis_x: float, axis_z: float, radius: float) 
     frame = np.empty_like(points)
     _project_uv(points, axis_x, axis_z, radius, frame)
     return frame
+
+
+def against_surroundings(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Which triangles face against the skin around them (a few, in the sharpest creases)."""
+    from .kernels import _against_surroundings, _vertex_normals
+
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    normals = np.empty_like(x)
+    _vertex_normals(x, faces, normals)
+    return np.array([_against_surroundings(x, faces, t, normals) for t in range(len(faces))], dtype=bool)
 
 
 def resolved_material(material: Material, resolution: float) -> Material:
@@ -188,6 +200,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         rest_position=x,
         faces=faces,
         rest_normal=mesh.face_normals,
+        rest_against=against_surroundings(x, faces),
         rest_area=mesh.face_areas,
         pinned=pinned,
         neighbour_start=start,

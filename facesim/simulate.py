@@ -34,7 +34,8 @@ class Animation:
     positions : (frames, n, 3) cm; rest : (n, 3); faces : (t, 3);
     activations : (frames, M + controls); pose : (frames, 5) head and gaze angles in
     degrees (facesim.spec.POSE), applied at render time; kinetic_energy, smallest_area :
-    (frames,) float; inverted : (frames,) int (triangles facing against their rest normal).
+    (frames,) float; inverted : (frames,) int (triangles turned over and folded against
+    the skin around them, ``kernels._triangle_checks``).
     """
 
     name: str

@@ -209,3 +209,21 @@ def test_whole_happy_run_matches_reference():
     expected = naive.simulate(model, table, s.dt)
     assert np.abs(positions - expected).max() < 1e-6
     assert np.abs(positions[-1] - model.rest_position).max() > 0.1
+
+
+def test_a_triangle_is_inverted_when_folded_against_the_skin_around_it_not_when_turned_as_a_whole(model):
+    def inverted(x):
+        x = np.ascontiguousarray(x)
+        return K._triangle_checks(x, model.faces, model.rest_normal, model.rest_area, model.rest_against,
+                                  np.empty_like(x))[0]
+
+    rest = model.rest_position
+    assert inverted(rest) == 0
+    a = np.radians(150.0)
+    turn = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    assert inverted(rest @ turn.T) == 0  # every normal is against its rest normal, yet nothing folded
+    for i in (151, 50):  # a forehead and a cheek vertex pushed across a neighbour: its fan folds over
+        j = model.neighbour_index[model.neighbour_start[i]]
+        pushed = rest.copy()
+        pushed[i] = rest[j] + 0.5 * (rest[j] - rest[i])
+        assert inverted(pushed) >= 2
