@@ -13,7 +13,8 @@ from facesim.mesh import load_mesh, subdivide, write_obj
 from facesim.muscles import MuscleFile, muscles_as_points
 from facesim.schema import load_model
 from facesim.spec import load_spec
-from test_simulation import CHECKS
+from conftest import THESIS_EXPRESSIONS
+from test_simulation import assert_expression_reads
 
 
 @pytest.fixture(scope="module")
@@ -45,17 +46,39 @@ def test_the_material_scales_with_the_skin_area_per_vertex(subdivided):
     assert fine.muscle_force.sum() == pytest.approx(s * default.muscle_force.sum())
 
 
-@pytest.mark.parametrize("name", ["sad", "angry"])
+@pytest.fixture(scope="module")
+def astronaut(tmp_path_factory):
+    """scikit-image's astronaut portrait through `facesim mesh from-photo`, with the
+    default muscle file as it is (the same MediaPipe topology)."""
+    pytest.importorskip("mediapipe", reason="MediaPipe not installed (pip install -e '.[photo]')")
+    import imageio.v3 as iio
+    from skimage import data
+
+    from facesim.photo import mesh_from_photo
+
+    root = tmp_path_factory.mktemp("astronaut")
+    iio.imwrite(root / "astronaut.png", data.astronaut())
+    mesh_from_photo(root / "astronaut.png", root / "astronaut.obj")
+    return root / "astronaut.obj", DEFAULT_MUSCLES
+
+
+@pytest.mark.parametrize("name", THESIS_EXPRESSIONS)
+@pytest.mark.parametrize("face", ["astronaut", "subdivided"])
+def test_the_eight_expressions_on_another_face_with_the_same_files(name, face, request):
+    """Same muscle and material files, no inverted triangle, and each expression's check
+    of the simulation tests (with its ablation) on a second face and on a finer mesh."""
+    assert_expression_reads(name, on(load_spec(EXPRESSIONS / f"{name}.yaml"), request.getfixturevalue(face)))
+
+
+@pytest.mark.parametrize("name", ["happy", "sad", "angry"])
 def test_a_subdivided_face_moves_like_the_default_one(subdivided, name):
     spec = load_spec(EXPRESSIONS / f"{name}.yaml")
     coarse = facesim.simulate(spec)
     fine = facesim.simulate(on(spec, subdivided))
-    assert fine.inverted.max() == 0
-    assert CHECKS[name][0](fine.rest, fine.positions[-1])
     for corner in (61, 291):  # Loop subdivision keeps the original vertices first
         a = coarse.positions[-1, corner] - coarse.rest[corner]
         b = fine.positions[-1, corner] - fine.rest[corner]
-        assert np.linalg.norm(a - b) < 0.2 * np.linalg.norm(a)
+        assert np.linalg.norm(a - b) < 0.25 * np.linalg.norm(a)
 
 
 def turned(points, degrees_yaw=25.0, degrees_pitch=10.0, scale=10.0, shift=(3.0, -40.0, 12.0)):
