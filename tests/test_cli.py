@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
+import facesim as facesim_api
 from conftest import EXPRESSIONS, THESIS_EXPRESSIONS
 
 SMALL = ["--size", "160x160"]
@@ -235,6 +236,7 @@ def test_divergence_is_reported_with_its_frame_and_nothing_written(tmp_path):
 def test_ctrl_c_leaves_nothing_behind(tmp_path):
     spec = write_spec(tmp_path, frames=3000, activations={"zygomaticus_major_l": 0.5})
     out = tmp_path / "long.mp4"
+    facesim_api.simulate(facesim_api.load_spec(spec).with_overrides(frames=2))  # Numba's cache warm: the child renders by 8 s
     # as from a terminal: a shell without job control (CI running us in the background)
     # hands its children SIGINT ignored, and Python then never raises KeyboardInterrupt
     process = subprocess.Popen([sys.executable, "-m", "facesim", "render", str(spec), "-o", str(out), *SMALL],
@@ -242,7 +244,7 @@ def test_ctrl_c_leaves_nothing_behind(tmp_path):
                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     time.sleep(8)
     process.send_signal(signal.SIGINT)
-    _, stderr = process.communicate(timeout=60)
+    _, stderr = process.communicate(timeout=120)
     assert process.returncode == 130, stderr
     assert "interrupted" in stderr and "Traceback" not in stderr
     assert list(tmp_path.iterdir()) == [spec]
