@@ -46,7 +46,7 @@ JAW_WEDGE = 0.3
 #: than half: they stay nearer the upper lip), driven with the full ``Material.drive``:
 #: the corner's sliver triangles fold over under any other pull (measured on the default
 #: face: 0.5, or a softer drive, inverts one at 20 degrees). A corner is the mouth
-#: opening's vertex in neither lip list and any vertex within JAW_CORNER_SIZE mouth widths.
+#: opening's leftmost or rightmost vertex and any vertex within JAW_CORNER_SIZE mouth widths.
 JAW_CORNER = 0.42
 JAW_CORNER_SIZE = 0.025
 #: The skin over the mandible is held to it with this share of ``Material.drive`` times
@@ -124,6 +124,11 @@ def harmonic(mesh: FaceMesh, fixed: np.ndarray, values: np.ndarray) -> np.ndarra
     return out
 
 
+def _opening(mesh: FaceMesh, vertices: np.ndarray) -> np.ndarray | None:
+    """The inner boundary loop (mouth or eye opening) that holds any of ``vertices``."""
+    return next((loop for loop in mesh.boundary_loops[1:] if np.isin(vertices, loop).any()), None)
+
+
 def _jaw(mesh: FaceMesh, muscles: MuscleSet):
     jaw = muscles.jaw
     x = mesh.vertices
@@ -136,9 +141,8 @@ def _jaw(mesh: FaceMesh, muscles: MuscleSet):
     # vertices) are the lower lip, which holds the listed lower points, and the upper lip;
     # a finer mesh has more vertices on them than the muscle file lists.
     lower, upper, corners = jaw.lower, jaw.upper, np.zeros(0, dtype=np.int64)
-    mouth = [loop for loop in mesh.boundary_loops[1:] if np.isin(jaw.lower, loop).any()]
-    if mouth:
-        loop = mouth[0]
+    loop = _opening(mesh, jaw.lower)
+    if loop is not None:
         ends = sorted([int(np.argmin(x[loop, 0])), int(np.argmax(x[loop, 0]))])
         arcs = loop[ends[0] + 1:ends[1]], np.concatenate([loop[ends[1] + 1:], loop[:ends[0]]])
         lower_first = np.isin(jaw.lower, arcs[0]).sum() >= np.isin(jaw.lower, arcs[1]).sum()
@@ -150,7 +154,7 @@ def _jaw(mesh: FaceMesh, muscles: MuscleSet):
     lips = np.concatenate([lower, upper])
     lip_weight = np.isin(lips, lower).astype(float)
     if len(corners):
-        width = np.ptp(x[mouth[0], 0])
+        width = np.ptp(x[loop, 0])
         near = np.linalg.norm(x[:, None] - x[None, corners], axis=2).min(axis=1) < JAW_CORNER_SIZE * width
         corners = np.union1d(corners, np.setdiff1d(np.flatnonzero(near), lips))
         distance = np.linalg.norm(x[lips, None, :2] - x[None, corners, :2], axis=2).min(axis=1)
@@ -174,7 +178,7 @@ def _cylindrical(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
     return np.column_stack([d[:, 0], np.arctan2(d[:, 1], d[:, 2]), np.hypot(d[:, 1], d[:, 2])])
 
 
-def _eyelid(mesh: FaceMesh, lid, centre: np.ndarray, radius: float, width: float):
+def _eyelid(mesh: FaceMesh, lid, opening: np.ndarray | None, centre: np.ndarray, radius: float, width: float):
     """The contour's (Δx, Δφ, Δr) at full closure, spread harmonically over the skin
     within ``reach`` eye widths of the opening. Returns the region and its deltas."""
     x = mesh.vertices
@@ -189,8 +193,7 @@ def _eyelid(mesh: FaceMesh, lid, centre: np.ndarray, radius: float, width: float
     contour = np.concatenate([lid.upper, lid.lower])
     distance = np.linalg.norm((x - centre)[:, :2], axis=1)
     outside = np.flatnonzero(distance > (0.5 + lid.reach) * width)
-    opening = [loop for loop in mesh.boundary_loops[1:] if np.isin(lid.upper, loop).any()]
-    corners = np.setdiff1d(opening[0], contour) if opening else np.zeros(0, dtype=np.int64)
+    corners = np.setdiff1d(opening, contour) if opening is not None else np.zeros(0, dtype=np.int64)
     fixed = np.concatenate([contour, corners, np.setdiff1d(outside, contour)])
     values = np.concatenate([delta_upper, delta_lower, np.zeros((len(fixed) - len(contour), 3))])
     delta = harmonic(mesh, fixed, values)
@@ -213,10 +216,10 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
     lid_centre = np.zeros((n, 3))
     lid_delta = np.zeros((n, 3))
     for lid in muscles.eyelids:
-        opening = [loop for loop in mesh.boundary_loops[1:] if np.isin(lid.upper, loop).any()]
-        points = mesh.vertices[opening[0] if opening else np.concatenate([lid.upper, lid.lower])]
+        opening = _opening(mesh, lid.upper)
+        points = mesh.vertices[opening if opening is not None else np.concatenate([lid.upper, lid.lower])]
         centre, radius = eyeball(points)
-        region, delta, contour = _eyelid(mesh, lid, centre, radius, float(np.ptp(points[:, 0])))
+        region, delta, contour = _eyelid(mesh, lid, opening, centre, radius, float(np.ptp(points[:, 0])))
         region_free = region[lid_column[region] < 0]
         keep = np.isin(region, region_free)
         lid_column[region_free] = muscles.index(lid.name)
