@@ -87,7 +87,8 @@ def _tissue_terms(x, target, tissue, hold, stiff, pull):
     jaw and eyelids) with stiffness k_t + hold_i, the soft tissue that attaches skin to
     bone. Not in the thesis (tissue = 0 is its model); a spring mesh has no bending
     stiffness, so under muscle pull it wrinkles and creeps without ever settling, and
-    these springs give every mode a restoring force. ``hold`` drives the lid contours."""
+    these springs give every mode a restoring force. ``hold`` holds the skin over the
+    mandible and the lid contours to their targets while the jaw and lids move."""
     for i in range(x.shape[0]):
         k = tissue + hold[i]
         stiff[i] -= k
