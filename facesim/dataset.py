@@ -11,7 +11,9 @@ the number of workers or the order they finish in:
 - otherwise one to three FACS action units, uniformly among those this face's muscles
   can show (never two that exclude each other), each at an intensity uniform in [0.3, 1];
 - with ``jitter``: the camera turned by a yaw uniform in [-15, 15] and a pitch in [-8, 8]
-  degrees, and the lights scaled by a factor uniform in [0.8, 1.2].
+  degrees, the lights scaled by a factor uniform in [0.8, 1.2], and the head and eyes
+  turned (``POSE_JITTER``: head yaw ±20, pitch ±10, roll ±8, gaze yaw ±15, pitch ±10
+  degrees, each uniform).
 
 Each sample is simulated for 20 frames (the activations easing in over 10) and its last
 frame rendered (with ``clip``, every frame too, as ``clips/<id>.mp4``). It is written atomically as ``images/<id>.png`` and ``labels/<id>.json``
@@ -43,6 +45,8 @@ from .writers import atomic_path
 
 BASIC = ("happy", "sad", "angry", "fear", "disgust", "surprise")
 FRAMES, ONSET = 20, 10
+#: The largest head and gaze angle drawn with ``jitter`` (degrees), in facesim.spec.POSE order.
+POSE_JITTER = {"head_yaw": 20.0, "head_pitch": 10.0, "head_roll": 8.0, "gaze_yaw": 15.0, "gaze_pitch": 10.0}
 
 
 @dataclass(frozen=True)
@@ -71,6 +75,7 @@ def sample(seed: int, index: int, available_aus: list[str]) -> dict:
                 chosen.append(str(au))
         draw["aus"] = {au: round(float(rng.uniform(0.3, 1.0)), 4) for au in sorted(chosen)}
     draw["yaw"], draw["pitch"], draw["light"] = rng.uniform(-15, 15), rng.uniform(-8, 8), rng.uniform(0.8, 1.2)
+    draw.update({name: rng.uniform(-limit, limit) for name, limit in POSE_JITTER.items()})
     return draw
 
 
@@ -114,7 +119,8 @@ def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
     try:
         animation = simulate(spec)
     except SimulationError as exc:  # recorded, not fatal: the same draw fails the same way anywhere
-        label.update(status=f"failed: {exc}", activations={}, yaw=0.0, pitch=0.0, light=1.0, image="", sha256="", clip="")
+        label.update(status=f"failed: {exc}", activations={}, yaw=0.0, pitch=0.0, light=1.0, image="", sha256="", clip="",
+                     **dict.fromkeys(POSE_JITTER, 0.0))
     else:
         label.update(_render_sample(root, sid, animation, draw, settings))
     with atomic_path(label_path) as tmp:
@@ -132,14 +138,15 @@ def _render_sample(root: Path, sid: str, animation, draw: dict, settings: Datase
                                settings.backend)
     yaw, pitch, light = (draw[k] if settings.jitter else v for k, v in (("yaw", 0.0), ("pitch", 0.0), ("light", 1.0)))
     renderer.view(yaw, pitch, light)
+    pose = {name: float(draw[name]) if settings.jitter else 0.0 for name in POSE_JITTER}
     if settings.clip:
         from .output import write_frames
 
-        frames = np.stack([renderer.render(p) for p in animation.positions])
+        frames = np.stack([renderer.render(p, pose=tuple(pose.values())) for p in animation.positions])
         write_frames(frames, root / "clips" / f"{sid}.mp4", "mp4", animation.fps)
         image = frames[-1]
     else:
-        image = renderer.render(animation.positions[-1])
+        image = renderer.render(animation.positions[-1], pose=tuple(pose.values()))
     buffer = io.BytesIO()
     iio.imwrite(buffer, image, extension=".png")
     png = buffer.getvalue()
@@ -149,6 +156,7 @@ def _render_sample(root: Path, sid: str, animation, draw: dict, settings: Datase
         status="ok",
         activations={m: round(float(a), 6) for m, a in zip(animation.muscle_names, animation.activations[-1]) if a > 0},
         yaw=round(float(yaw), 4), pitch=round(float(pitch), 4), light=round(float(light), 4),
+        **{name: round(angle, 4) for name, angle in pose.items()},
         image=f"images/{sid}.png", sha256=hashlib.sha256(png).hexdigest(),
         clip=f"clips/{sid}.mp4" if settings.clip else "",
     )
@@ -229,7 +237,7 @@ def write_manifest(directory: Path) -> Path:
     rows = [{**r, "aus": json.dumps(r["aus"], sort_keys=True), "activations": json.dumps(r["activations"], sort_keys=True)}
             for r in labels]
     columns = ["id", "index", "seed", "status", "expression", "intensity", "aus", "activations", "yaw", "pitch", "light",
-               "width", "height", "frames", "dt", "image", "sha256", "clip"]
+               *POSE_JITTER, "width", "height", "frames", "dt", "image", "sha256", "clip"]
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq

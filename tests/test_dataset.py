@@ -10,7 +10,8 @@ import pytest
 
 pytest.importorskip("dask.distributed")
 
-from facesim.dataset import DatasetSettings, build_dataset, read_manifest, sample  # noqa: E402
+import numpy as np  # noqa: E402
+from facesim.dataset import POSE_JITTER, DatasetSettings, build_dataset, read_manifest, sample  # noqa: E402
 from facesim.errors import InputError  # noqa: E402
 
 SETTINGS = DatasetSettings(seed=7, width=64, height=64, jitter=True)
@@ -37,6 +38,9 @@ def test_the_draw_depends_on_seed_and_index_only():
     draws = [sample(7, i, aus) for i in range(200)]
     assert 60 < sum(d["expression"] is not None for d in draws) < 140
     assert not any({"AU14", "AU20"} <= set(d["aus"]) for d in draws)
+    for name, limit in POSE_JITTER.items():  # head and gaze turned within their limits, both ways
+        angles = np.array([d[name] for d in draws])
+        assert np.abs(angles).max() <= limit and angles.min() < -limit / 2 and angles.max() > limit / 2
 
 
 def test_dask_local_cluster_gives_the_same_manifest_as_the_local_executor(tmp_path):
@@ -45,7 +49,7 @@ def test_dask_local_cluster_gives_the_same_manifest_as_the_local_executor(tmp_pa
     a, b = check_complete(local.parent, 6), check_complete(dask.parent, 6)
     assert [(r["id"], r["sha256"]) for r in a] == [(r["id"], r["sha256"]) for r in b]
     assert len({r["sha256"] for r in a}) == 6  # six different images
-    assert {"expression", "aus", "activations", "yaw", "light", "sha256"} <= set(a[0])
+    assert {"expression", "aus", "activations", "yaw", "light", "head_yaw", "gaze_pitch", "sha256"} <= set(a[0])
 
 
 def test_an_interrupted_run_completes_with_nothing_duplicated_or_missing(tmp_path):
