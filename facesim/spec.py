@@ -37,8 +37,8 @@ from .errors import InputError
 from .model import Material
 from .muscles import MuscleSet
 from .schema import Strict, load_model
-from .timeline import (INTERPOLATIONS, apply_cooccurrence, au_muscles, check_exclusions, envelope_keys, interpolate,
-                       parse_intensity)
+from .timeline import (INTERPOLATIONS, MPEG4_FAPS, apply_cooccurrence, au_muscles, check_exclusions, envelope_keys,
+                       interpolate, parse_intensity)
 
 Activation = Annotated[float, Field(ge=0.0, le=1.0)]
 #: More frames than this is taken for a typo: 100k frames is over an hour at 25 fps.
@@ -298,6 +298,7 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
         raise InputError(f"{spec.source}: {where}: {message}")
 
     def muscle_vector(name: str, where: str) -> np.ndarray:
+        name = MPEG4_FAPS.get(name, name)
         if name not in names:
             fail(where, "unknown muscle (see `facesim muscles`)")
         v = np.zeros(len(names))
@@ -331,7 +332,7 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
         where = f"timeline -> {k} -> target"
         if re.fullmatch(r"AU\d+", track.target):
             au_curves[track.target] = au_curves.get(track.target, 0) + curve
-        elif track.target in names:
+        elif track.target in names or track.target in MPEG4_FAPS:
             table += np.outer(curve, muscle_vector(track.target, where))
         else:
             table += np.outer(curve, expression_vector(track.target))

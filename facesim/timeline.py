@@ -99,6 +99,11 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     "AU43": ("eyes closed", {"eyelid": 1.0}),
     "AU45": ("blink", {"eyelid": 1.0}),
 }
+#: MPEG-4 facial animation parameters that name a control of this face (FAPs 3 and
+#: 19-22), usable wherever a muscle name is, with values in [0, 1] of the control's range
+#: rather than in FAP units. MPEG-4's left is the subject's left, as ``_l`` is here.
+MPEG4_FAPS = {"open_jaw": "jaw", "close_t_l_eyelid": "eyelid_l", "close_b_l_eyelid": "eyelid_l",
+              "close_t_r_eyelid": "eyelid_r", "close_b_r_eyelid": "eyelid_r"}
 #: FACS intensity letters, trace (A) to maximum (E).
 FACS_LETTERS = {"A": 0.2, "B": 0.4, "C": 0.6, "D": 0.8, "E": 1.0}
 

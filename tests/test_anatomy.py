@@ -156,3 +156,11 @@ def test_gaze_turns_the_eyes(model, renderer):
         assert col - col0 > 2  # both eyes turn toward the subject's left
     for (row, col), (row0, col0) in zip(irises(renderer.render(rest, pose=(0, 0, 0, 0, 20))), straight):
         assert row < row0 - 0.3  # and up (the upper lid hides part of the iris)
+
+
+def test_mpeg4_parameters_name_the_jaw_and_the_lids(model, tmp_path):
+    path = tmp_path / "fap.yaml"
+    path.write_text(yaml.safe_dump({"onset": 0, "activations": {"open_jaw": 0.5, "close_t_l_eyelid": 1.0},
+                                    "timeline": [{"target": "close_t_r_eyelid", "keys": [[0, 0.3]]}]}))
+    last = dict(zip(model.muscles.names, activation_table(load_spec(path), model.muscles)[-1]))
+    assert last["jaw"] == 0.5 and last["eyelid_l"] == 1.0 and last["eyelid_r"] == pytest.approx(0.3)
