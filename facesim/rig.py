@@ -130,6 +130,8 @@ def _opening(mesh: FaceMesh, vertices: np.ndarray) -> np.ndarray | None:
 
 
 def _jaw(mesh: FaceMesh, muscles: MuscleSet):
+    """The jaw's column, per-vertex weight, hinge point and axis, angle at activation 1,
+    and the mouth-corner vertices (driven firmly)."""
     jaw = muscles.jaw
     x = mesh.vertices
     hinge = jaw.hinge
