@@ -84,7 +84,20 @@ class SphincterEntry(_Muscle):
     ring: list[Point] = Field(..., min_length=4)
 
 
-class Jaw(Strict):
+class _Contours(Strict):
+    """Upper and lower points paired in order, upper over lower: a part's contacts."""
+
+    upper: list[Point] = Field(..., min_length=1)
+    lower: list[Point] = Field(..., min_length=1)
+
+    @model_validator(mode="after")
+    def _paired(self):
+        if len(self.upper) != len(self.lower):
+            raise ValueError(f"upper ({len(self.upper)} points) and lower ({len(self.lower)}) must pair up")
+        return self
+
+
+class Jaw(_Contours):
     """The mandible: a rotation about the hinge axis through two points (the
     temporomandibular joints), ``max_angle`` degrees at activation 1. ``lower`` points
     follow it fully, ``upper`` points stay with the skull; the rest of the face follows
@@ -92,34 +105,18 @@ class Jaw(Strict):
     up, upper over lower: the lips' contacts."""
 
     hinge: tuple[Point, Point]
-    lower: list[Point] = Field(..., min_length=1)
-    upper: list[Point] = Field(..., min_length=1)
     max_angle: float = Field(20.0, gt=0, le=45)
 
-    @model_validator(mode="after")
-    def _paired(self):
-        if len(self.upper) != len(self.lower):
-            raise ValueError(f"upper ({len(self.upper)} points) and lower ({len(self.lower)}) must pair up")
-        return self
 
-
-class Eyelid(Strict):
+class Eyelid(_Contours):
     """One eye's lids: the upper and lower contour points, paired from one eye corner to
     the other. ``reach`` is how far around the opening the skin follows the lids, in eye
     widths."""
 
     name: str
-    upper: list[Point] = Field(..., min_length=1)
-    lower: list[Point] = Field(..., min_length=1)
     reach: float = Field(0.45, gt=0, le=2)
 
     _names = field_validator("name")(_snake_case)
-
-    @model_validator(mode="after")
-    def _paired(self):
-        if len(self.upper) != len(self.lower):
-            raise ValueError(f"upper ({len(self.upper)} points) and lower ({len(self.lower)}) must pair up")
-        return self
 
 
 class Pinned(Strict):
