@@ -15,6 +15,11 @@ PROJECT_DIR = PACKAGE_DIR.parent
 #: The default face and its muscles (facesim is installed editable from its checkout).
 DEFAULT_MESH = PROJECT_DIR / "meshes" / "face.obj"
 DEFAULT_MUSCLES = PROJECT_DIR / "meshes" / "face.muscles.yaml"
+#: The Hopper face (468 vertices, the scale of the thesis's HIGEM), which also simulates
+#: ICT FaceKit's head (facesim.head); the head and its muscles.
+HOPPER_MESH = PROJECT_DIR / "meshes" / "face.obj"
+HEAD = PROJECT_DIR / "meshes" / "ict" / "head.npz"
+HEAD_MUSCLES = PROJECT_DIR / "meshes" / "ict" / "head.muscles.yaml"
 
 #: Below this muscle falloff δ (eq. 3.4) a vertex is outside the region of influence and
 #: the flood fill of section 3.3 does not grow through it.

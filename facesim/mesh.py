@@ -207,11 +207,17 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.array(vertices, dtype=np.float64).reshape(-1, 3), np.array(faces, dtype=np.int64).reshape(-1, 3)
 
 
-def load_mesh(path: str | Path) -> FaceMesh:
-    """Read a face mesh (OBJ, PLY, GLB, anything trimesh reads) without reordering vertices."""
+def load_mesh(path: str | Path, identity=None) -> FaceMesh:
+    """Read a face mesh (OBJ, PLY, GLB, anything trimesh reads) without reordering vertices,
+    or a head archive (facesim.head, with an ``identity``)."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: mesh file not found")
+    if path.suffix.lower() == ".npz":  # a head: its simulation mesh, which keeps the head
+        from .config import HOPPER_MESH
+        from .head import load_head
+
+        return load_head(path, identity).simulation_mesh(load_mesh(HOPPER_MESH))
     try:
         if path.suffix.lower() == ".obj":
             vertices, faces = _read_obj(path)

@@ -30,7 +30,7 @@ and folded three lip-corner triangles; with √s it settles and folds none.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydantic import Field
@@ -100,6 +100,7 @@ class Model:
     muscles: MuscleSet
     rig: Rig
     scale: float  # bounding-box diagonal of the face, cm
+    mesh: FaceMesh | None = field(default=None, repr=False, compare=False)  # a head's simulation mesh keeps its head
     resolution: float = 1.0  # s: skin area per vertex over the default face's (module docstring)
     length_unit: float = 1.0  # √s: the unit of stretch in the non-linear springs
 
@@ -232,6 +233,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         **{key: _frozen(value) for key, value in arrays.items()},
         axis_x=axis_x, axis_z=axis_z, radius=radius, material=resolved_material(material, resolution), muscles=muscles,
         rig=build_rig(mesh, muscles), scale=mesh.scale, resolution=resolution, length_unit=float(np.sqrt(resolution)),
+        mesh=mesh,
     )
 
 

@@ -90,11 +90,11 @@ def render_frames(animation: Animation, settings: RenderSettings, backend: str =
     frames = animation.frames
     if jobs <= 1 or frames < 2 * jobs:
         own = renderer is None
-        renderer = renderer or FaceRenderer(animation.rest, animation.faces, settings, backend)
+        renderer = renderer or FaceRenderer(animation.rest, animation.faces, settings, backend, animation.figure)
         try:
             out = []
             for k, p in enumerate(animation.positions):
-                out.append(renderer.render(p, None if arrows is None else arrows[k], animation.pose_at(k)))
+                out.append(renderer.render(p, None if arrows is None else arrows[k], animation.pose_at(k), animation.jaw_at(k)))
                 if progress:
                     progress(1)
             return np.stack(out)

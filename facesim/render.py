@@ -167,27 +167,38 @@ def _openings(rest: np.ndarray, faces: np.ndarray) -> tuple[list[np.ndarray], np
 class FaceRenderer:
     """A pyrender scene of one face, rendered offscreen frame after frame."""
 
-    def __init__(self, rest: np.ndarray, faces: np.ndarray, settings: RenderSettings = RenderSettings(), backend: str = "auto"):
+    def __init__(self, rest: np.ndarray, faces: np.ndarray, settings: RenderSettings = RenderSettings(), backend: str = "auto",
+                 figure=None):
+        """A face mesh ``rest``/``faces`` (a mask, drawn with eyeballs and a mouth cavity
+        behind its openings) or, with ``figure`` (facesim.figure), a whole head driven
+        by its simulation mesh ``rest``."""
         self.backend = use_backend(backend)
         import pyrender
         import trimesh
 
         self.settings = settings
         self._pyrender = pyrender
-        self._faces = np.ascontiguousarray(faces, dtype=np.int64)
-        self._normals = np.empty_like(rest)
-        _vertex_normals(rest, self._faces, self._normals)
-        scene = pyrender.Scene(bg_color=BACKGROUND, ambient_light=(0.28, 0.26, 0.26))
-        skin = pyrender.MetallicRoughnessMaterial(baseColorFactor=SKIN, metallicFactor=0.0, roughnessFactor=0.75, doubleSided=True)
-        self._face = pyrender.Primitive(positions=rest, normals=self._normals, indices=self._faces, material=skin)
+        self._figure = figure
         self._head = pyrender.Node(name="head", matrix=np.eye(4))
+        scene = pyrender.Scene(bg_color=BACKGROUND, ambient_light=(0.28, 0.26, 0.26))
         scene.add_node(self._head)
-        scene.add(pyrender.Mesh([self._face]), parent_node=self._head)
         self._eyes: list[tuple] = []
-        self._add_eyes_and_mouth(scene, rest, faces, pyrender, trimesh)
-        low, high = rest.min(axis=0), rest.max(axis=0)
-        # The head turns about the top of the spine: behind the jaw, on the mask's back plane.
-        self._neck = np.array([(low[0] + high[0]) / 2, low[1] + NECK_HEIGHT * (high[1] - low[1]), low[2]])
+        if figure is None:
+            self._faces = np.ascontiguousarray(faces, dtype=np.int64)
+            self._normals = np.empty_like(rest)
+            _vertex_normals(rest, self._faces, self._normals)
+            skin = pyrender.MetallicRoughnessMaterial(baseColorFactor=SKIN, metallicFactor=0.0, roughnessFactor=0.75, doubleSided=True)
+            self._face = pyrender.Primitive(positions=rest, normals=self._normals, indices=self._faces, material=skin)
+            scene.add(pyrender.Mesh([self._face]), parent_node=self._head)
+            self._add_eyes_and_mouth(scene, rest, faces, pyrender, trimesh)
+            low, high = rest.min(axis=0), rest.max(axis=0)
+            # The head turns about the top of the spine: behind the jaw, on the mask's back plane.
+            self._neck = np.array([(low[0] + high[0]) / 2, low[1] + NECK_HEIGHT * (high[1] - low[1]), low[2]])
+            framed = rest
+        else:
+            self._add_figure(scene, figure, pyrender)
+            self._neck = figure.neck
+            framed = figure.rest
         self._arrows = None
         if settings.show_muscles:
             lines = np.repeat(rest, 2, axis=0)
@@ -197,8 +208,8 @@ class FaceRenderer:
             )
             scene.add(pyrender.Mesh([self._arrows]), parent_node=self._head)
 
-        centre = (rest.min(axis=0) + rest.max(axis=0)) / 2
-        extent = np.ptp(rest, axis=0)
+        centre = (framed.min(axis=0) + framed.max(axis=0)) / 2
+        extent = np.ptp(framed, axis=0)
         fov = np.radians(25.0)
         distance = 0.62 * max(extent[1], extent[0] * settings.height / settings.width) / np.tan(fov / 2) + extent[2] / 2
         yaw = np.radians(CAMERAS[settings.camera])
@@ -224,6 +235,23 @@ class FaceRenderer:
             _single_sample(self._renderer._renderer)
         self._flags = pyrender.RenderFlags.ALL_WIREFRAME if settings.wireframe else pyrender.RenderFlags.NONE
         self._renderer.render(self._scene, flags=self._flags)  # uploads the buffers once
+
+    def _add_figure(self, scene, figure, pyrender) -> None:
+        """One primitive per part of the figure, each over its own vertices, coloured per
+        vertex; smooth normals over the whole figure, so seams between parts that share
+        vertices (face, scalp, neck) do not show."""
+        self._faces = np.ascontiguousarray(figure.triangles, dtype=np.int64)
+        self._normals = np.empty_like(figure.rest)
+        _vertex_normals(figure.rest, self._faces, self._normals)
+        self._parts = []
+        for part in figure.parts:
+            rows, local = np.unique(part.triangles, return_inverse=True)
+            material = pyrender.MetallicRoughnessMaterial(baseColorFactor=(1.0, 1.0, 1.0, 1.0), metallicFactor=0.0,
+                                                          roughnessFactor=part.roughness, doubleSided=True)
+            primitive = pyrender.Primitive(positions=figure.rest[rows], normals=self._normals[rows], color_0=figure.colour[rows],
+                                           indices=local.reshape(-1, 3), material=material)
+            scene.add(pyrender.Mesh([primitive]), parent_node=self._head)
+            self._parts.append((primitive, rows))
 
     def _add_eyes_and_mouth(self, scene, rest, faces, pyrender, trimesh) -> None:
         eyes, mouth = _openings(rest, faces)
@@ -268,15 +296,25 @@ class FaceRenderer:
         for node, centre in self._eyes:  # the eyeball is built at the origin, pupil along +z
             self._scene.set_pose(node, _pose(_rotation(gaze_yaw, gaze_pitch), centre))
 
-    def render(self, positions: np.ndarray, arrows: np.ndarray | None = None, pose=None) -> np.ndarray:
+    def render(self, positions: np.ndarray, arrows: np.ndarray | None = None, pose=None, jaw: float = 0.0) -> np.ndarray:
         """One frame: positions (n, 3) of the face, optional arrows (n, 3) drawn from
-        each vertex (muscle forces), optional head and gaze angles (5,) in degrees.
+        each vertex (muscle forces), optional head and gaze angles (5,) in degrees, the
+        jaw's angle (radians; a figure's teeth and tongue turn with it).
         Returns (height, width, 3) uint8."""
-        self.pose(*(() if pose is None else pose))
+        pose = np.zeros(5) if pose is None else np.asarray(pose, dtype=np.float64)
         positions = np.ascontiguousarray(positions, dtype=np.float64)
-        _vertex_normals(positions, self._faces, self._normals)
         self._renderer._platform.make_current()
-        self._upload(self._face, np.hstack([positions, self._normals]).astype(np.float32))
+        if self._figure is None:
+            self.pose(*pose)
+            _vertex_normals(positions, self._faces, self._normals)
+            self._upload(self._face, np.hstack([positions, self._normals]).astype(np.float32))
+        else:
+            self.pose(*pose[:3])
+            scene = self._figure.positions(positions, jaw, tuple(pose[3:5]))
+            _vertex_normals(scene, self._faces, self._normals)
+            for primitive, rows in self._parts:
+                self._upload(primitive, np.hstack([scene[rows], self._normals[rows], self._figure.colour[rows]]).astype(np.float32))
+            positions = scene[self._figure.anchor]
         if self._arrows is not None:
             vectors = np.zeros_like(positions) if arrows is None else arrows
             lines = np.stack([positions, positions + vectors], axis=1).reshape(-1, 3).astype(np.float32)

@@ -56,6 +56,16 @@ class Animation:
     def pose_at(self, frame: int) -> np.ndarray | None:
         return None if self.pose is None else self.pose[frame]
 
+    def jaw_at(self, frame: int) -> float:
+        """The jaw's angle (radians) at a frame: its activation times its largest angle."""
+        rig = None if self.model is None else self.model.rig
+        return 0.0 if rig is None or rig.jaw_column < 0 else float(self.activations[frame, rig.jaw_column] * rig.jaw_max)
+
+    @property
+    def figure(self):
+        """The head this animation's face drives (facesim.figure), or None for a mask."""
+        return None if self.model is None else figure_for(self.model)
+
     @property
     def frames(self) -> int:
         return len(self.positions)
@@ -66,19 +76,39 @@ class Animation:
 
 
 @lru_cache(maxsize=8)
-def _mesh_and_muscles(mesh_path: Path, muscles_path: Path) -> tuple[FaceMesh, MuscleSet]:
-    mesh = load_mesh(mesh_path)
+def _mesh_and_muscles(mesh_path: Path, muscles_path: Path, identity=None) -> tuple[FaceMesh, MuscleSet]:
+    mesh = load_mesh(mesh_path, identity)
     return mesh, load_muscles(muscles_path, mesh)
 
 
 @lru_cache(maxsize=8)
-def _model(mesh_path: Path, muscles_path: Path, material: Material) -> Model:
-    return build_model(*_mesh_and_muscles(mesh_path, muscles_path), material)
+def _model(mesh_path: Path, muscles_path: Path, material: Material, identity=None) -> Model:
+    return build_model(*_mesh_and_muscles(mesh_path, muscles_path, identity), material)
+
+
+def _identity_key(identity):
+    return tuple(identity) if isinstance(identity, list) else identity
 
 
 def model_for(spec: Spec) -> Model:
-    """The (cached) model of a spec's mesh, muscles and material."""
-    return _model(spec.mesh_path.resolve(), spec.muscles_path.resolve(), spec.material)
+    """The (cached) model of a spec's mesh, muscles, material and identity."""
+    return _model(spec.mesh_path.resolve(), spec.muscles_path.resolve(), spec.material, _identity_key(spec.identity))
+
+
+_figures: dict[int, tuple] = {}
+
+
+def figure_for(model: Model):
+    """What the renderer draws for a model: a head's figure (built once per model: the
+    biharmonic weights take a second), or None for a face mask."""
+    from .figure import head_figure
+    from .head import HeadMesh
+
+    if not isinstance(model.mesh, HeadMesh):
+        return None
+    if id(model) not in _figures:
+        _figures[id(model)] = (model, head_figure(model.mesh.head, model))  # the model kept alive with its key
+    return _figures[id(model)][1]
 
 
 def run(

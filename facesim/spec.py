@@ -162,6 +162,8 @@ class Spec(Strict):
     material: Material = Material()
     mesh: Path | None = None
     muscles: Path | None = None
+    identity: int | list[float] | None = Field(None, description=(
+        "a head's identity (facesim.head): a seed for weights from the standard normal distribution, or the weights"))
     _source: Path | None = PrivateAttr(None)
 
     @field_validator("aus")

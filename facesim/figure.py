@@ -1,0 +1,290 @@
+"""What the renderer draws: a figure of parts, and how each vertex follows the simulation.
+
+A :class:`Figure` holds every vertex of the scene at rest, a colour per vertex and the
+parts (skin, teeth, eyes, ...) with their triangles and material. Per frame,
+:meth:`Figure.positions` turns the simulated skin (n vertices) and the jaw's angle into
+the figure's vertices, in four linear steps:
+
+1. ``follow``: vertices that ride the skin take a fixed linear combination of the
+   simulation's displacements (for a bare mask, its own vertices one for one);
+2. ``jaw``: vertices on the mandible (lower teeth, tongue, the floor of the mouth) turn
+   with it about the hinge, by their weight;
+3. ``eyes``: each eyeball turns about its centre for the gaze;
+4. the skin around each eye is kept outside its eyeball (a contact, as the lids slide).
+
+For ICT's head (:func:`head_figure`) the face area follows the simulation mesh by
+biharmonic interpolation (the smooth minimiser of the squared graph Laplacian, exact at
+each landmark's vertex, zero on the rigid scalp, ears and neck); the mouth and eye sockets
+follow the face area's openings harmonically, the eyelashes and the eye's lacrimal and
+occlusion shells the lid vertices nearest them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import numpy as np
+from scipy.sparse import coo_matrix, diags
+from scipy.sparse.linalg import splu
+
+from .head import Head
+from .mesh import FaceMesh
+from .rig import LID_GAP
+
+SKIN = (0.86, 0.66, 0.55, 1.0)
+LIPS = (0.74, 0.43, 0.42, 1.0)
+MOUTH = (0.30, 0.08, 0.09, 1.0)
+GUMS = (0.72, 0.36, 0.38, 1.0)
+TEETH = (0.93, 0.91, 0.84, 1.0)
+SCLERA = (0.95, 0.94, 0.92, 1.0)
+IRIS = (0.28, 0.42, 0.52, 1.0)
+PUPIL = (0.03, 0.03, 0.03, 1.0)
+LASHES = (0.22, 0.16, 0.12, 1.0)
+CARUNCLE = (0.78, 0.50, 0.48, 1.0)
+
+#: ICT's parts drawn, with the colour and roughness of each; the lacrimal fluid, eye blend
+#: and eye occlusion shells exist for a shader's transparency and shadowing and are hidden.
+HEAD_PARTS = {
+    "M_Face": (SKIN, 0.75), "M_BackHead": (SKIN, 0.75), "M_GumsTongue": (GUMS, 0.4), "M_Teeth": (TEETH, 0.3),
+    "M_ScleraLeft": (SCLERA, 0.2), "M_ScleraRight": (SCLERA, 0.2), "M_IrisLeft": (IRIS, 0.2),
+    "M_IrisRight": (IRIS, 0.2), "M_EyeLashes": (LASHES, 0.9),
+}
+#: The skin inside the mouth (the socket) darkens with depth behind the lips (cm).
+MOUTH_DEPTH = 1.5
+#: Rigid skin of the face area: behind this depth (cm) above the jaw's angle (the ears and
+#: mastoid), and below NECK_Y (the neck).
+EAR_Z, EAR_ABOVE_Y, NECK_Y = 3.0, -3.5, -11.0
+#: The head turns about the top of the spine (atlanto-occipital joint), in ICT's frame.
+HEAD_NECK = (0.0, -1.5, 0.0)
+#: Pupil radius (cm) on ICT's iris.
+PUPIL_RADIUS = 0.22
+
+
+@dataclass(frozen=True)
+class Part:
+    name: str
+    triangles: np.ndarray  # (t, 3) into Figure.rest
+    roughness: float = 0.75
+
+
+@dataclass(frozen=True)
+class Figure:
+    """rest : (N, 3); colour : (N, 4); sim_rest : (n, 3) the simulation mesh at rest;
+    anchor : (n,) the figure vertex where each simulated vertex shows (muscle arrows);
+    follow_rows : (k,), follow : (k, n) displacement weights; jaw_rows, jaw_weight : (j,);
+    jaw_hinge, jaw_axis : (3,); eyes : (rows, centre) per eyeball; guards : (rows,
+    centre, radius) per eye, skin kept outside it; neck : (3,) the head's pivot."""
+
+    rest: np.ndarray
+    colour: np.ndarray
+    parts: tuple[Part, ...]
+    sim_rest: np.ndarray
+    anchor: np.ndarray
+    follow_rows: np.ndarray
+    follow: np.ndarray
+    jaw_rows: np.ndarray
+    jaw_weight: np.ndarray
+    jaw_hinge: np.ndarray
+    jaw_axis: np.ndarray
+    eyes: tuple
+    guards: tuple
+    neck: np.ndarray
+
+    @property
+    def triangles(self) -> np.ndarray:
+        return np.concatenate([p.triangles for p in self.parts])
+
+    def positions(self, sim: np.ndarray, jaw_angle: float = 0.0, gaze: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+        """(N, 3): the figure for simulated positions ``sim`` (n, 3), the jaw's angle
+        (radians) and the gaze (yaw, pitch in degrees)."""
+        x = self.rest.copy()
+        x[self.follow_rows] += self.follow @ (sim - self.sim_rest)
+        if jaw_angle and len(self.jaw_rows):
+            rest = self.rest[self.jaw_rows] - self.jaw_hinge
+            turned = rest @ axis_rotation(self.jaw_axis, jaw_angle).T
+            x[self.jaw_rows] += self.jaw_weight[:, None] * (turned - rest)
+        if any(gaze):
+            from .render import _rotation
+
+            turn = _rotation(*gaze)
+            for rows, centre in self.eyes:
+                x[rows] = (x[rows] - centre) @ turn.T + centre
+        for rows, centre, radius in self.guards:
+            d = x[rows] - centre
+            r = np.linalg.norm(d, axis=1)
+            inside = r < radius
+            x[rows[inside]] = centre + d[inside] * (radius[inside] / r[inside])[:, None]
+        return x
+
+
+def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """3x3 rotation by ``angle`` (radians) about the unit ``axis`` (Rodrigues)."""
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def _laplacian(triangles: np.ndarray, n: int):
+    e = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    e = np.unique(e, axis=0)
+    i, j = np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]])
+    adjacency = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)).tocsr()
+    return (diags(np.asarray(adjacency.sum(axis=1)).ravel()) - adjacency).tocsr()
+
+
+def interpolation(triangles: np.ndarray, n: int, fixed: np.ndarray, values: np.ndarray, order: int = 1) -> np.ndarray:
+    """(n, c) values equal to ``values`` (f, c) on the ``fixed`` vertices that minimise
+    the squared graph Laplacian (order 2, biharmonic: smooth through the fixed points) or
+    the Dirichlet energy (order 1, harmonic) everywhere else."""
+    laplacian = _laplacian(triangles, n)
+    system = (laplacian.T @ laplacian if order == 2 else laplacian).tocsr()
+    free = np.setdiff1d(np.arange(n), fixed)
+    out = np.zeros((n, values.shape[1]))
+    out[fixed] = values
+    used = np.unique(triangles)
+    free = free[np.isin(free, used)]
+    if len(free):
+        out[free] = splu(system[free][:, free].tocsc()).solve(-(system[free][:, fixed] @ values))
+    return out
+
+
+def _rigid_face(x: np.ndarray, face: FaceMesh) -> np.ndarray:
+    """The face area's skin that no muscle moves: its rim, the ears and mastoid, the neck."""
+    rigid = ((x[:, 2] < EAR_Z) & (x[:, 1] > EAR_ABOVE_Y)) | (x[:, 1] < NECK_Y)
+    rigid[face.boundary_loops[0]] = True
+    return np.flatnonzero(rigid)
+
+
+def _lip_colour(x: np.ndarray, head: Head, rows: np.ndarray) -> np.ndarray:
+    """(k,) how much of the lips' colour each skin vertex takes: inside the vermilion
+    outline (MediaPipe's outer lip landmarks on this head), softened over 1.5 mm."""
+    from matplotlib.path import Path as Outline
+
+    ring = [61, 185, 40, 39, 37, 0, 267, 269, 270, 409, 291, 375, 321, 405, 314, 17, 84, 181, 91, 146]
+    outline = head.landmark_positions[ring]
+    front = x[rows, 2] > outline[:, 2].min() - 1.0
+    inside = Outline(outline[:, :2]).contains_points(x[rows, :2]) & front
+    edge = np.min(np.linalg.norm(x[rows, None, :2] - outline[None, :, :2], axis=2), axis=1)
+    return np.where(inside, np.clip(edge / 0.15, 0.0, 1.0) * 0.5 + 0.5, 0.0) * (edge < 3)
+
+
+def _face_follow(head: Head, sim_count: int) -> np.ndarray:
+    """(9409, n) biharmonic weights of the face area on the landmarks' vertices."""
+    face = head.face_mesh()
+    x = face.vertices
+    handles = head.landmarks
+    rigid = np.setdiff1d(_rigid_face(x, face), handles)
+    fixed = np.concatenate([handles, rigid])
+    values = np.zeros((len(fixed), sim_count))
+    values[np.arange(len(handles)), np.arange(len(handles))] = 1.0
+    return interpolation(face.faces, len(x), fixed, values, order=2)
+
+
+def head_figure(head: Head, model) -> Figure:
+    """ICT's head driven by the simulation ``model`` of its skin (facesim.model.Model)."""
+    sim_rest = model.rest_position
+    x = head.vertices
+    n_face = head.face_count
+    n = len(sim_rest)
+    face_follow = _face_follow(head, n)
+    # The lids travel as far as the head's own opening: a lid landmark's motion is scaled by
+    # the ratio of the head's lid gap to the simulation mesh's (eyes open wider on ICT's head).
+    gain = np.ones(n)
+    for upper, lower in [(lid.upper, lid.lower) for lid in model.muscles.eyelids]:
+        head_gap = x[head.landmarks[upper], 1] - x[head.landmarks[lower], 1]
+        sim_gap = sim_rest[upper, 1] - sim_rest[lower, 1]
+        ratio = np.clip((head_gap - LID_GAP) / np.maximum(sim_gap - LID_GAP, 1e-3), 0.5, 3.0)  # closed: both LID_GAP
+        gain[upper] = gain[lower] = ratio
+    face_follow = face_follow * gain[None, :]
+
+    # Sockets follow the face's openings harmonically, fixed in the skull behind them.
+    socket_triangles = head.triangles_of("M_BackHead")
+    socket = np.setdiff1d(np.unique(socket_triangles), np.arange(n_face))
+    shared = np.intersect1d(np.unique(socket_triangles), np.arange(n_face))
+    deep_mouth = head.part("mouth_socket")[x[head.part("mouth_socket"), 2] < x[head.part("mouth_socket"), 2].max() - MOUTH_DEPTH]
+    deep = np.concatenate([head.part("head_neck"), deep_mouth,
+                           *[p[x[p, 2] < x[p, 2].max() - 0.8] for p in (head.part("eye_socket_left"), head.part("eye_socket_right"))]])
+    fixed = np.concatenate([shared, np.setdiff1d(deep, shared)])
+    socket_weights = interpolation(socket_triangles, len(x), fixed, np.vstack([face_follow[shared], np.zeros((len(fixed) - len(shared), n))]))
+    bound = []
+    for part, lid_region in (("left", 1), ("right", -1)):
+        for kind in ("eyelashes", "lacrimal_fluid", "eye_occlusion", "eye_blend"):
+            rows = head.part(f"{kind}_{part}")
+            lid = np.flatnonzero((np.sign(x[:n_face, 0]) == lid_region) & (np.linalg.norm(x[:n_face] - x[rows].mean(axis=0), axis=1) < 3.0))
+            d = np.linalg.norm(x[rows, None] - x[None, lid], axis=2)
+            near = np.argsort(d, axis=1)[:, :3]
+            w = 1.0 / (np.take_along_axis(d, near, axis=1) + 1e-3)
+            w /= w.sum(axis=1, keepdims=True)
+            bound.append((rows, np.einsum("kj,kjn->kn", w, face_follow[lid[near]])))
+    follow_rows = np.concatenate([np.arange(n_face), socket] + [r for r, _ in bound])
+    follow = np.vstack([face_follow, socket_weights[socket]] + [w for _, w in bound]).astype(np.float64)
+
+    # The mandible: lower teeth and gums, the tongue, the floor of the mouth.
+    teeth = head.part("teeth")
+    upper_teeth_bottom = np.percentile(x[teeth, 1], 35)
+    lower_rows = np.concatenate([teeth, head.part("gums_tongue"), head.part("mouth_socket")])
+    y = x[lower_rows, 1]
+    weight = np.clip((upper_teeth_bottom + 0.3 - y) / 0.6, 0.0, 1.0)
+    teeth_components = _components(head.triangles_of("M_Teeth"), teeth)
+    for rows in teeth_components:  # a tooth is rigid: upper or lower as a whole
+        weight[np.isin(lower_rows, rows)] = float(x[rows, 1].mean() < np.mean([x[r, 1].mean() for r in teeth_components]))
+    socket_part = np.isin(lower_rows, head.part("mouth_socket"))
+    weight[socket_part] *= np.isin(lower_rows[socket_part], deep_mouth)
+
+    colour = np.tile(np.array(SKIN), (len(x), 1))
+    lips = _lip_colour(x, head, np.arange(n_face))
+    colour[:n_face] = (1 - lips[:, None]) * np.array(SKIN) + lips[:, None] * np.array(LIPS)
+    mouth = head.part("mouth_socket")
+    colour[mouth] = MOUTH
+    for side in ("left", "right"):
+        colour[head.part(f"eye_socket_{side}")] = CARUNCLE
+    colour[head.part("gums_tongue")] = GUMS
+    colour[teeth] = TEETH
+    parts = []
+    eyes, guards = [], []
+    for material in HEAD_PARTS:
+        tri = head.triangles_of(material)
+        if material.startswith("M_Sclera"):  # ICT's sclera runs on over the iris as a clear cornea
+            tri = tri[~_over_iris(x, head, material[len("M_Sclera"):].lower(), tri)]
+        rows = np.unique(tri)
+        colour[rows] = HEAD_PARTS[material][0] if material not in ("M_Face", "M_BackHead") else colour[rows]
+        parts.append(Part(material, tri, HEAD_PARTS[material][1]))
+    for side in ("left", "right"):
+        ball = head.part(f"eyeball_{side}")
+        _, radius = head.eyeball(side)
+        centre, axis, iris = _iris_axis(x, head, side)
+        off_axis = np.linalg.norm(np.cross(x[iris] - centre, axis), axis=1)
+        colour[iris[off_axis < PUPIL_RADIUS]] = PUPIL
+        eyes.append((ball, centre))
+        near = np.flatnonzero(np.linalg.norm(x[:n_face] - centre, axis=1) < 1.6 * radius)
+        distance = np.linalg.norm(x[near] - centre, axis=1)
+        guards.append((near, centre, np.minimum(distance, radius + 0.02)))
+    return Figure(
+        rest=x, colour=colour.astype(np.float32), parts=tuple(parts), sim_rest=np.asarray(sim_rest), anchor=head.landmarks,
+        follow_rows=follow_rows, follow=follow, jaw_rows=lower_rows[weight > 0], jaw_weight=weight[weight > 0],
+        jaw_hinge=model.rig.jaw_hinge, jaw_axis=model.rig.jaw_axis, eyes=tuple(eyes), guards=tuple(guards), neck=np.array(HEAD_NECK),
+    )
+
+
+def _iris_axis(x: np.ndarray, head: Head, side: str):
+    """The eye's centre, the unit axis through its iris, and the iris's vertices."""
+    centre, _ = head.eyeball(side)
+    iris = np.unique(head.triangles_of(f"M_Iris{side.title()}"))
+    axis = x[iris].mean(axis=0) - centre
+    return centre, axis / np.linalg.norm(axis), iris
+
+
+def _over_iris(x: np.ndarray, head: Head, side: str, triangles: np.ndarray) -> np.ndarray:
+    """(t,) which sclera triangles lie in front of the iris (the cornea)."""
+    centre, axis, iris = _iris_axis(x, head, side)
+    radius = np.linalg.norm(np.cross(x[iris] - centre, axis), axis=1).max()
+    points = x[triangles].mean(axis=1) - centre
+    return (points @ axis > 0) & (np.linalg.norm(np.cross(points, axis), axis=1) < radius)
+
+
+def _components(triangles: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
+    from scipy.sparse.csgraph import connected_components
+
+    n = rows.max() + 1
+    e = triangles[:, [0, 1, 1, 2]].reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    return [rows[label[rows] == k] for k in np.unique(label[rows])]

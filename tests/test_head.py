@@ -1,0 +1,86 @@
+"""ICT FaceKit's head: vendored in ICT's vertex order, identities, the thesis expressions
+simulated on it, the jaw carrying the lower teeth, the lids meeting over the eyeballs."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from conftest import THESIS_EXPRESSIONS, spec
+from facesim.config import HEAD, HEAD_MUSCLES
+from facesim.head import load_head
+from facesim.simulate import figure_for, simulate
+
+#: Vertex positions read off the upstream generic_neutral_mesh.obj (its v lines 1, 5000,
+#: 9409, 17040, 21452, 26719): face, face, last face vertex, first tooth, first sclera
+#: vertex, last eyelash vertex.
+UPSTREAM = {0: (0, -2.48251, 11.8387), 4999: (-0.533943, 0.294245, 9.91105), 9408: (4.1177, -15.4276, 2.93726),
+            17039: (2.32055, -2.23823, 5.83703), 21451: (3.28169, 3.59814, 9.64501), 26718: (-5.07248, 2.84276, 8.72492)}
+
+
+def head_spec(name: str, **changes):
+    return spec(name, mesh=HEAD, muscles=HEAD_MUSCLES, **changes)
+
+
+@pytest.fixture(scope="module")
+def head():
+    return load_head(HEAD)
+
+
+def test_vendored_head_keeps_ict_vertex_order(head):
+    assert head.vertices.shape == (26719, 3)
+    for index, position in UPSTREAM.items():
+        np.testing.assert_allclose(head.vertices[index], position, atol=1e-4)
+    assert head.parts["face"] == (0, 9408) and head.parts["eyelashes_right"] == (26035, 26718)
+    # every part's triangles stay inside its own range (the OBJ's usemtl groups)
+    teeth = head.triangles_of("M_Teeth")
+    assert teeth.min() >= 17039 and teeth.max() <= 21450
+
+
+def test_identities_are_distinct_people_of_human_size():
+    heads = [load_head(HEAD, seed).vertices for seed in range(10)]
+    for a, b in itertools.combinations(heads, 2):
+        assert np.sqrt(((a - b) ** 2).sum(axis=1).mean()) >= 0.3
+    for seed in range(10):
+        corners = load_head(HEAD, seed).landmark_positions[[33, 263]]
+        assert 8.0 <= np.linalg.norm(corners[0] - corners[1]) <= 10.5
+
+
+@pytest.mark.parametrize("name", THESIS_EXPRESSIONS)
+def test_thesis_expressions_simulate_on_the_head(name):
+    for identity in (None, *range(10)):
+        animation = simulate(head_spec(name, identity=identity))  # raises on an inverted triangle
+        assert animation.inverted.max() == 0
+
+
+def test_jaw_turns_the_lower_teeth_and_keeps_the_upper(head):
+    animation = simulate(head_spec("happy", activations={"jaw": 1.0}, aus={}, include=[], onset=15))
+    figure = figure_for(animation.model)
+    angle = animation.jaw_at(animation.frames - 1)
+    assert angle == pytest.approx(np.radians(20))
+    opened = figure.positions(animation.positions[-1], angle)
+    closed = figure.positions(animation.model.rest_position, 0.0)
+    teeth = head.part("teeth")
+    lower = teeth[head.vertices[teeth, 1] < -4.0]  # only the lower row reaches below the upper
+    upper = teeth[head.vertices[teeth, 1] > -1.5]
+    from facesim.figure import axis_rotation
+
+    hinge, axis = figure.jaw_hinge, figure.jaw_axis
+    expected = (head.vertices[lower] - hinge) @ axis_rotation(axis, angle).T + hinge
+    np.testing.assert_allclose(opened[lower], expected, atol=1e-6)
+    assert np.linalg.norm(opened[lower] - closed[lower], axis=1).min() > 1.0
+    np.testing.assert_allclose(opened[upper], closed[upper], atol=1e-9)
+
+
+def test_blink_meets_the_lids_outside_the_eyeballs(head):
+    animation = simulate(head_spec("blink"))
+    figure = figure_for(animation.model)
+    closed = int(np.argmax(animation.activations[:, animation.muscle_names.index("eyelid_r")]))
+    x = figure.positions(animation.positions[closed])
+    for upper, lower in ((159, 145), (386, 374)):
+        gap = x[head.landmarks[upper], 1] - x[head.landmarks[lower], 1]
+        assert gap < 0.05
+    for frame in range(animation.frames):
+        x = figure.positions(animation.positions[frame])
+        for rows, centre, radius in figure.guards:
+            assert (np.linalg.norm(x[rows] - centre, axis=1) >= radius - 1e-9).all()
