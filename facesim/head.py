@@ -52,7 +52,6 @@ class Head:
     landmarks: np.ndarray
     landmark_vertex: np.ndarray
     landmark_weight: np.ndarray
-    simulation_triangles: np.ndarray
 
     def part(self, name: str) -> np.ndarray:
         """(k,) int64: the vertices of one part."""
@@ -163,10 +162,4 @@ def load_head(path: str | Path, identity: int | list[float] | tuple[float, ...] 
         landmarks=data["landmarks"].astype(np.int64),
         landmark_vertex=data["landmark_vertex"].astype(np.int64),
         landmark_weight=data["landmark_weight"].astype(np.float64),
-        simulation_triangles=data["simulation_triangles"].astype(np.int64),
     )
-
-
-def is_head(path: str | Path) -> bool:
-    """Whether a mesh path names a head archive rather than a face mesh file."""
-    return Path(path).suffix.lower() == ".npz"
