@@ -23,28 +23,25 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import numpy as np
-from scipy.sparse import coo_matrix, diags
-from scipy.sparse.linalg import splu
+from scipy.sparse import coo_matrix
 
 from .head import Head
-from .mesh import FaceMesh
+from .mesh import FaceMesh, smooth_interpolation, unique_edges
+from .render import IRIS, PUPIL, SCLERA, SKIN, _rotation
 from .rig import LID_GAP
 
-SKIN = (0.86, 0.66, 0.55, 1.0)
 LIPS = (0.74, 0.43, 0.42, 1.0)
-MOUTH = (0.30, 0.08, 0.09, 1.0)
+MOUTH_SOCKET = (0.30, 0.08, 0.09, 1.0)
 GUMS = (0.72, 0.36, 0.38, 1.0)
 TEETH = (0.93, 0.91, 0.84, 1.0)
-SCLERA = (0.95, 0.94, 0.92, 1.0)
-IRIS = (0.28, 0.42, 0.52, 1.0)
-PUPIL = (0.03, 0.03, 0.03, 1.0)
 LASHES = (0.22, 0.16, 0.12, 1.0)
 CARUNCLE = (0.78, 0.50, 0.48, 1.0)
 
-#: ICT's parts drawn, with the colour and roughness of each; the lacrimal fluid, eye blend
-#: and eye occlusion shells exist for a shader's transparency and shadowing and are hidden.
+#: ICT's parts drawn, with the colour (None: per vertex, see head_figure) and roughness of
+#: each; the lacrimal fluid, eye blend and eye occlusion shells exist for a shader's
+#: transparency and shadowing and are hidden.
 HEAD_PARTS = {
-    "M_Face": (SKIN, 0.75), "M_BackHead": (SKIN, 0.75), "M_GumsTongue": (GUMS, 0.4), "M_Teeth": (TEETH, 0.3),
+    "M_Face": (None, 0.75), "M_BackHead": (None, 0.75), "M_GumsTongue": (GUMS, 0.4), "M_Teeth": (TEETH, 0.3),
     "M_ScleraLeft": (SCLERA, 0.2), "M_ScleraRight": (SCLERA, 0.2), "M_IrisLeft": (IRIS, 0.2),
     "M_IrisRight": (IRIS, 0.2), "M_EyeLashes": (LASHES, 0.9),
 }
@@ -103,8 +100,6 @@ class Figure:
             turned = rest @ axis_rotation(self.jaw_axis, jaw_angle).T
             x[self.jaw_rows] += self.jaw_weight[:, None] * (turned - rest)
         if any(gaze):
-            from .render import _rotation
-
             turn = _rotation(*gaze)
             for rows, centre in self.eyes:
                 x[rows] = (x[rows] - centre) @ turn.T + centre
@@ -120,30 +115,6 @@ def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     """3x3 rotation by ``angle`` (radians) about the unit ``axis`` (Rodrigues)."""
     k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
-
-
-def _laplacian(triangles: np.ndarray, n: int):
-    e = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    e = np.unique(e, axis=0)
-    i, j = np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]])
-    adjacency = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)).tocsr()
-    return (diags(np.asarray(adjacency.sum(axis=1)).ravel()) - adjacency).tocsr()
-
-
-def interpolation(triangles: np.ndarray, n: int, fixed: np.ndarray, values: np.ndarray, order: int = 1) -> np.ndarray:
-    """(n, c) values equal to ``values`` (f, c) on the ``fixed`` vertices that minimise
-    the squared graph Laplacian (order 2, biharmonic: smooth through the fixed points) or
-    the Dirichlet energy (order 1, harmonic) everywhere else."""
-    laplacian = _laplacian(triangles, n)
-    system = (laplacian.T @ laplacian if order == 2 else laplacian).tocsr()
-    free = np.setdiff1d(np.arange(n), fixed)
-    out = np.zeros((n, values.shape[1]))
-    out[fixed] = values
-    used = np.unique(triangles)
-    free = free[np.isin(free, used)]
-    if len(free):
-        out[free] = splu(system[free][:, free].tocsc()).solve(-(system[free][:, fixed] @ values))
-    return out
 
 
 def _rigid_face(x: np.ndarray, face: FaceMesh) -> np.ndarray:
@@ -175,7 +146,7 @@ def _face_follow(head: Head, sim_count: int) -> np.ndarray:
     fixed = np.concatenate([handles, rigid])
     values = np.zeros((len(fixed), sim_count))
     values[np.arange(len(handles)), np.arange(len(handles))] = 1.0
-    return interpolation(face.faces, len(x), fixed, values, order=2)
+    return smooth_interpolation(face.edges, len(x), fixed, values, order=2)
 
 
 def head_figure(head: Head, model) -> Figure:
@@ -199,11 +170,13 @@ def head_figure(head: Head, model) -> Figure:
     socket_triangles = head.triangles_of("M_BackHead")
     socket = np.setdiff1d(np.unique(socket_triangles), np.arange(n_face))
     shared = np.intersect1d(np.unique(socket_triangles), np.arange(n_face))
-    deep_mouth = head.part("mouth_socket")[x[head.part("mouth_socket"), 2] < x[head.part("mouth_socket"), 2].max() - MOUTH_DEPTH]
+    mouth = head.part("mouth_socket")
+    deep_mouth = mouth[x[mouth, 2] < x[mouth, 2].max() - MOUTH_DEPTH]
     deep = np.concatenate([head.part("head_neck"), deep_mouth,
                            *[p[x[p, 2] < x[p, 2].max() - 0.8] for p in (head.part("eye_socket_left"), head.part("eye_socket_right"))]])
     fixed = np.concatenate([shared, np.setdiff1d(deep, shared)])
-    socket_weights = interpolation(socket_triangles, len(x), fixed, np.vstack([face_follow[shared], np.zeros((len(fixed) - len(shared), n))]))
+    socket_weights = smooth_interpolation(unique_edges(socket_triangles), len(x), fixed,
+                                          np.vstack([face_follow[shared], np.zeros((len(fixed) - len(shared), n))]))
     bound = []
     for part, lid_region in (("left", 1), ("right", -1)):
         for kind in ("eyelashes", "lacrimal_fluid", "eye_occlusion", "eye_blend"):
@@ -220,20 +193,19 @@ def head_figure(head: Head, model) -> Figure:
     # The mandible: lower teeth and gums, the tongue, the floor of the mouth.
     teeth = head.part("teeth")
     upper_teeth_bottom = np.percentile(x[teeth, 1], 35)
-    lower_rows = np.concatenate([teeth, head.part("gums_tongue"), head.part("mouth_socket")])
+    lower_rows = np.concatenate([teeth, head.part("gums_tongue"), mouth])
     y = x[lower_rows, 1]
     weight = np.clip((upper_teeth_bottom + 0.3 - y) / 0.6, 0.0, 1.0)
     teeth_components = _components(head.triangles_of("M_Teeth"), teeth)
     for rows in teeth_components:  # a tooth is rigid: upper or lower as a whole
         weight[np.isin(lower_rows, rows)] = float(x[rows, 1].mean() < np.mean([x[r, 1].mean() for r in teeth_components]))
-    socket_part = np.isin(lower_rows, head.part("mouth_socket"))
+    socket_part = np.isin(lower_rows, mouth)
     weight[socket_part] *= np.isin(lower_rows[socket_part], deep_mouth)
 
     colour = np.tile(np.array(SKIN), (len(x), 1))
     lips = _lip_colour(x, head, np.arange(n_face))
     colour[:n_face] = (1 - lips[:, None]) * np.array(SKIN) + lips[:, None] * np.array(LIPS)
-    mouth = head.part("mouth_socket")
-    colour[mouth] = MOUTH
+    colour[mouth] = MOUTH_SOCKET
     for side in ("left", "right"):
         colour[head.part(f"eye_socket_{side}")] = CARUNCLE
     colour[head.part("gums_tongue")] = GUMS
@@ -244,8 +216,8 @@ def head_figure(head: Head, model) -> Figure:
         tri = head.triangles_of(material)
         if material.startswith("M_Sclera"):  # ICT's sclera runs on over the iris as a clear cornea
             tri = tri[~_over_iris(x, head, material[len("M_Sclera"):].lower(), tri)]
-        rows = np.unique(tri)
-        colour[rows] = HEAD_PARTS[material][0] if material not in ("M_Face", "M_BackHead") else colour[rows]
+        if HEAD_PARTS[material][0] is not None:
+            colour[np.unique(tri)] = HEAD_PARTS[material][0]
         parts.append(Part(material, tri, HEAD_PARTS[material][1]))
     for side in ("left", "right"):
         ball = head.part(f"eyeball_{side}")

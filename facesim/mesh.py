@@ -32,6 +32,32 @@ def csr_from_pairs(rows: np.ndarray, cols: np.ndarray, n: int) -> tuple[np.ndarr
     return np.cumsum(start), cols[order].astype(np.int64)
 
 
+def unique_edges(faces: np.ndarray) -> np.ndarray:
+    """(e, 2) int64: the unique undirected edges of triangles, smaller index first."""
+    e = np.sort(np.asarray(faces)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    return np.unique(e, axis=0).astype(np.int64)
+
+
+def smooth_interpolation(edges: np.ndarray, n: int, fixed: np.ndarray, values: np.ndarray, order: int = 1) -> np.ndarray:
+    """(n, d) values equal to ``values`` (f, d) on the ``fixed`` vertices and, everywhere
+    else on the graph of ``edges``, harmonic (order 1: the mean of their neighbours, the
+    Dirichlet problem of the graph Laplacian L) or biharmonic (order 2: minimising |L x|²,
+    smooth through the fixed points). Vertices on no edge keep 0."""
+    from scipy.sparse import coo_matrix, diags
+    from scipy.sparse.linalg import splu
+
+    i, j = np.concatenate([edges[:, 0], edges[:, 1]]), np.concatenate([edges[:, 1], edges[:, 0]])
+    adjacency = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)).tocsr()
+    laplacian = (diags(np.asarray(adjacency.sum(axis=1)).ravel()) - adjacency).tocsr()
+    system = (laplacian.T @ laplacian).tocsr() if order == 2 else laplacian
+    out = np.zeros((n, values.shape[1]))
+    out[fixed] = values
+    free = np.setdiff1d(np.unique(edges), fixed)
+    if len(free):
+        out[free] = splu(system[free][:, free].tocsc()).solve(-(system[free][:, fixed] @ values))
+    return out
+
+
 class FaceMesh:
     """A triangle mesh of a face in centimetres, +x the subject's left, +y up, +z forward.
 
@@ -49,8 +75,7 @@ class FaceMesh:
     @cached_property
     def edges(self) -> np.ndarray:
         """(e, 2) int64: unique undirected edges, smaller index first."""
-        e = np.sort(self.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-        return _readonly(np.unique(e, axis=0))
+        return _readonly(unique_edges(self.faces))
 
     @cached_property
     def neighbours(self) -> tuple[np.ndarray, np.ndarray]:

@@ -34,10 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.linalg import spsolve
-
-from .mesh import FaceMesh
+from .mesh import FaceMesh, smooth_interpolation
 from .muscles import MuscleSet
 
 #: The lips part as a wedge over this fraction of the mouth's width from each corner.
@@ -108,20 +105,7 @@ def eyeball(opening: np.ndarray) -> tuple[np.ndarray, float]:
 def harmonic(mesh: FaceMesh, fixed: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Values (n, d) that equal ``values`` on the ``fixed`` vertices and are harmonic (the
     mean of their neighbours) everywhere else: the Dirichlet problem of the graph Laplacian."""
-    n = mesh.vertex_count
-    e = mesh.edges
-    i, j = np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]])
-    adjacency = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)).tocsr()
-    laplacian = (coo_matrix((np.asarray(adjacency.sum(axis=1)).ravel(), (np.arange(n), np.arange(n))), shape=(n, n))
-                 - adjacency).tocsr()
-    out = np.zeros((n, values.shape[1]))
-    out[fixed] = values
-    free = np.setdiff1d(np.arange(n), fixed)
-    if len(free):
-        rhs = -laplacian[free][:, fixed] @ values
-        solution = spsolve(laplacian[free][:, free].tocsc(), rhs)
-        out[free] = solution.reshape(len(free), -1)
-    return out
+    return smooth_interpolation(mesh.edges, mesh.vertex_count, fixed, values)
 
 
 def _opening(mesh: FaceMesh, vertices: np.ndarray) -> np.ndarray | None:
