@@ -64,6 +64,14 @@ ANTIALIAS = typer.Option(True, "--antialias/--no-antialias", help="4x multisampl
 FORCE = typer.Option(False, "--force", help="overwrite an existing output")
 MESH = typer.Option(None, "--mesh", help="face mesh to use instead of the spec's")
 MUSCLES = typer.Option(None, "--muscles", help="muscle file to use instead of the spec's")
+IDENTITY = typer.Option(None, "--identity", help="the head's identity instead of the spec's: a seed for the "
+                        "weights of ICT's 100 identity modes (standard normal)")
+
+
+def identity_seed(identity: Optional[int]) -> Optional[int]:
+    if identity is not None and identity < 0:
+        raise InputError(f"--identity: expected a non-negative seed, got {identity}")
+    return identity
 
 
 @app.command()
@@ -82,6 +90,7 @@ def render(
     jobs: int = typer.Option(1, "--jobs", help="render frames in this many processes"),
     mesh: Optional[Path] = MESH,
     muscles: Optional[Path] = MUSCLES,
+    identity: Optional[int] = IDENTITY,
     blend: Optional[str] = typer.Option(None, "--blend", help="blend expressions, e.g. happy=0.6,surprise=0.4"),
 ):
     """Simulate one expression spec (or a blend of expressions) and render it."""
@@ -98,7 +107,7 @@ def render(
     loaded = load_spec(spec) if spec else blend_spec(blend)
     if spec and blend:
         loaded = loaded.with_overrides(include=loaded.include + blend_spec(blend).include)
-    loaded = loaded.with_overrides(mesh=mesh, muscles=muscles)
+    loaded = loaded.with_overrides(mesh=mesh, muscles=muscles, identity=identity_seed(identity))
     output = output or Path("out") / f"{loaded.title}.mp4"
     check_output(output, force, settings)
     animation = simulate(loaded)
@@ -123,6 +132,7 @@ def batch(
     force: bool = FORCE,
     mesh: Optional[Path] = MESH,
     muscles: Optional[Path] = MUSCLES,
+    identity: Optional[int] = IDENTITY,
     executor: str = typer.Option("local", "--executor", help="local (processes) or dask"),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="tcp://HOST:PORT of a Dask scheduler"),
 ):
@@ -146,7 +156,7 @@ def batch(
     except OSError as exc:
         raise InputError(f"{outdir}: cannot create the output directory ({exc.strerror})") from None
     with progress_bar(len(specs), "batch") as advance:
-        results = run_batch(specs, outdir, suffix, settings, backend, jobs, force, mesh, muscles,
+        results = run_batch(specs, outdir, suffix, settings, backend, jobs, force, mesh, muscles, identity_seed(identity),
                             on_done=(lambda _: advance()) if advance else None, executor=executor, scheduler=scheduler)
     table = Table(title=f"facesim batch: {len(specs)} specs")
     for column in ("spec", "muscles", "frames", "simulation (ms)", "render (s)", "fps", "output"):
@@ -191,20 +201,21 @@ def validate(specs: list[Path] = typer.Argument(..., help="spec files")):
 @handled
 def info(mesh: Optional[Path] = MESH, muscles: Optional[Path] = MUSCLES):
     """The face mesh, its muscles, and which OpenGL backends work here."""
-    from .config import DEFAULT_MESH, DEFAULT_MUSCLES
+    from .config import DEFAULT_MESH, default_muscles
     from .mesh import load_mesh
     from .muscles import SPHINCTER, load_muscles
     from .render import BACKENDS
 
     mesh_path = mesh or DEFAULT_MESH
+    muscles = muscles or default_muscles(mesh_path)
     face = load_mesh(mesh_path)
-    muscle_set = load_muscles(muscles or DEFAULT_MUSCLES, face)
+    muscle_set = load_muscles(muscles, face)
     cx, cz, radius = face.vertical_axis
     typer.echo(f"mesh: {mesh_path}: {face.vertex_count} vertices, {len(face.faces)} triangles, "
                f"boundary loops {[len(l) for l in face.boundary_loops]}, size {face.scale:.1f} cm")
     typer.echo(f"projection (eq. 3.21): vertical axis at x={cx:.2f}, z={cz:.2f} cm, radius {radius:.2f} cm")
     sphincters = int((muscle_set.kind == SPHINCTER).sum())
-    typer.echo(f"muscles: {muscles or DEFAULT_MUSCLES}: {muscle_set.count} muscles ({muscle_set.count - sphincters} linear, "
+    typer.echo(f"muscles: {muscles}: {muscle_set.count} muscles ({muscle_set.count - sphincters} linear, "
                f"{sphincters} sphincter), {len(muscle_set.pinned)} pinned vertices, "
                f"controls: {', '.join(muscle_set.controls) or 'none'}")
     for backend in BACKENDS:
@@ -226,14 +237,15 @@ def muscles_command(
     from rich.console import Console
     from rich.table import Table
 
-    from .config import DEFAULT_MESH, DEFAULT_MUSCLES
+    from .config import DEFAULT_MESH, default_muscles
     from .model import Material, build_model
     from .mesh import load_mesh
     from .muscles import SPHINCTER, load_muscles
     from .plots import muscle_regions, plot_muscles
 
-    face = load_mesh(mesh or DEFAULT_MESH)
-    model = build_model(face, load_muscles(muscles or DEFAULT_MUSCLES, face), Material())
+    mesh = mesh or DEFAULT_MESH
+    face = load_mesh(mesh)
+    model = build_model(face, load_muscles(muscles or default_muscles(mesh), face), Material())
     regions = muscle_regions(model)
     m = model.muscles
     table = Table(title=f"{model.muscle_count} muscles; controls: {', '.join(m.controls) or 'none'}")
@@ -263,6 +275,7 @@ def sheet(
     columns: int = typer.Option(3, "--columns"),
     mesh: Optional[Path] = MESH,
     muscles: Optional[Path] = MUSCLES,
+    identity: Optional[int] = IDENTITY,
 ):
     """Every expression at its apex in a labelled grid, the neutral face first: the last
     frame of an expression that eases in and holds, the strongest of a sequence. An
@@ -280,7 +293,8 @@ def sheet(
     if output.exists() and not force:
         raise InputError(f"{output}: already exists (use --force to overwrite)")
     order = {name: k for k, name in enumerate(THESIS_ORDER)}
-    specs = sorted((load_spec(p).with_overrides(mesh=mesh, muscles=muscles) for p in collect_specs(inputs)),
+    overrides = dict(mesh=mesh, muscles=muscles, identity=identity_seed(identity))
+    specs = sorted((load_spec(p).with_overrides(**overrides) for p in collect_specs(inputs)),
                    key=lambda s: (order.get(s.title, len(order)), s.title))
     results, failures = [], []
     for spec in specs:
@@ -296,20 +310,19 @@ def sheet(
     settings = settings_from(size, "front")
     blank = np.full((settings.height, settings.width, 3), np.array(BACKGROUND[:3]) * 255, dtype=np.uint8)
     images, labels = [], ["neutral"]
-    with FaceRenderer(first.rest, first.faces, settings, backend) as renderer:
+    with FaceRenderer.of(first, settings, backend) as renderer:
         images.append(renderer.render(first.rest))
         for title, a in results:
             labels.append(title.replace("_", " "))
             if a is None:
                 images.append(blank)
                 continue
-            same_mesh = a.rest.shape == first.rest.shape and (a.rest == first.rest).all()
-            apex = apex_frame(a)
-            if same_mesh:
-                images.append(renderer.render(a.positions[apex], pose=a.pose_at(apex)))
+            same_face = a.rest.shape == first.rest.shape and (a.rest == first.rest).all() and a.figure is first.figure
+            if same_face:
+                images.append(renderer.frame(a, apex_frame(a)))
             else:
-                with FaceRenderer(a.rest, a.faces, settings, backend) as own:
-                    images.append(own.render(a.positions[apex], pose=a.pose_at(apex)))
+                with FaceRenderer.of(a, settings, backend) as own:
+                    images.append(own.frame(a, apex_frame(a)))
     output.parent.mkdir(parents=True, exist_ok=True)
     contact_sheet(images, labels, output, columns)
     typer.echo(f"wrote {output}: {len(images)} faces", err=True)
@@ -354,11 +367,11 @@ def dataset(
 def mesh_info(mesh: Path = typer.Argument(..., help="a mesh file (OBJ, PLY, GLB, ...)")):
     """Vertices, triangles, openings, scale and orientation of a mesh, which muscle file
     fits it, and what is wrong with it. Exit code 1 when something is."""
-    from .config import DEFAULT_MESH, DEFAULT_MUSCLES
+    from .config import HOPPER_MESH, HOPPER_MUSCLES
     from .mesh import diagnose, load_mesh
 
     face = load_mesh(mesh)
-    default = load_mesh(DEFAULT_MESH)
+    default = load_mesh(HOPPER_MESH)
     v = face.vertices
     typer.echo(f"{mesh}: {face.vertex_count} vertices, {len(face.faces)} triangles, "
                f"{face.connected_components()} piece(s)")
@@ -366,7 +379,7 @@ def mesh_info(mesh: Path = typer.Argument(..., help="a mesh file (OBJ, PLY, GLB,
     extent = np.ptp(v, axis=0)
     typer.echo(f"size: {extent[0]:.2f} x {extent[1]:.2f} x {extent[2]:.2f} (x, y, z)")
     same_topology = face.vertex_count == default.vertex_count and np.array_equal(face.edges, default.edges)
-    typer.echo("muscles: " + (f"{DEFAULT_MUSCLES} fits by landmark index (MediaPipe topology)" if same_topology else
+    typer.echo("muscles: " + (f"{HOPPER_MUSCLES} fits by landmark index (MediaPipe topology)" if same_topology else
                               "another topology: name landmarks (`facesim mesh landmarks`), then `facesim mesh align` "
                               "writes it in the face frame with the muscles carried by position"))
     problems = diagnose(face)
@@ -391,14 +404,14 @@ def mesh_landmarks(
     from rich.table import Table
 
     from .align import propose_landmarks
-    from .config import DEFAULT_MESH
+    from .config import HOPPER_MESH
     from .mesh import load_mesh
     from .writers import atomic_path
 
     if output and output.exists() and not force:
         raise InputError(f"{output}: already exists (use --force to overwrite)")
-    proposal = propose_landmarks(load_mesh(mesh), load_mesh(DEFAULT_MESH))
-    table = Table(title=f"landmarks of {mesh} (distance after matching bounding boxes, cm of the default face)")
+    proposal = propose_landmarks(load_mesh(mesh), load_mesh(HOPPER_MESH))
+    table = Table(title=f"landmarks of {mesh} (distance after matching bounding boxes, cm of the Hopper face)")
     for column in ("landmark", "vertex", "distance"):
         table.add_column(column)
     for name, (vertex, distance) in proposal.items():
@@ -415,16 +428,16 @@ def mesh_landmarks(
 def mesh_align(
     mesh: Path = typer.Argument(..., help="a mesh file of any topology (OBJ, PLY, GLB, ...)"),
     landmarks: Path = typer.Option(..., "--landmarks", help="YAML: landmark name -> vertex index or [x, y, z]"),
-    output: Path = typer.Option(..., "-o", "--output", help="OBJ to write, in the default face's frame (cm)"),
+    output: Path = typer.Option(..., "-o", "--output", help="OBJ to write, in the Hopper face's frame (cm)"),
     muscles_out: Optional[Path] = typer.Option(None, "--muscles-out", help="muscle file to write (default: OUTPUT with .muscles.yaml)"),
     force: bool = FORCE,
 ):
-    """Move, turn and scale a mesh onto the default face by named landmarks (a similarity
-    fit) and write it with the default muscle file carried to it by position."""
+    """Move, turn and scale a mesh onto the Hopper face (meshes/face.obj) by named landmarks
+    (a similarity fit) and write it with the Hopper face's muscles carried to it by position."""
     import yaml
 
     from .align import align, load_landmarks
-    from .config import DEFAULT_MESH, DEFAULT_MUSCLES
+    from .config import HOPPER_MESH, HOPPER_MUSCLES
     from .mesh import load_mesh, write_obj
     from .muscles import MuscleFile, load_muscles, muscles_as_points
     from .schema import load_model
@@ -435,12 +448,12 @@ def mesh_align(
         if path.exists() and not force:
             raise InputError(f"{path}: already exists (use --force to overwrite)")
     face = load_mesh(mesh)
-    default = load_mesh(DEFAULT_MESH)
+    default = load_mesh(HOPPER_MESH)
     aligned, residual = align(face, load_landmarks(landmarks, face), default)
-    carried = muscles_as_points(load_model(DEFAULT_MUSCLES, MuscleFile), default)
-    write_obj(output, aligned, header=f"{mesh} aligned to the default face by {landmarks}")
+    carried = muscles_as_points(load_model(HOPPER_MUSCLES, MuscleFile), default)
+    write_obj(output, aligned, header=f"{mesh} aligned to the Hopper face by {landmarks}")
     with atomic_path(muscles_out) as tmp:
-        tmp.write_text(f"# The default muscles carried by position to {output.name}.\n"
+        tmp.write_text(f"# The Hopper face's muscles carried by position to {output.name}.\n"
                        + yaml.safe_dump(carried.model_dump(mode="json"), sort_keys=False))
     resolved = load_muscles(muscles_out, load_mesh(output))  # every muscle snaps, or a one-line error
     typer.echo(f"wrote {output} and {muscles_out}: {resolved.count} muscles; landmark residuals "

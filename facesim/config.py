@@ -12,14 +12,32 @@ NUMBA_OPTIONS = dict(cache=True, nogil=True, fastmath=True)
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 PROJECT_DIR = PACKAGE_DIR.parent
-#: The default face and its muscles (facesim is installed editable from its checkout).
-DEFAULT_MESH = PROJECT_DIR / "meshes" / "face.obj"
-DEFAULT_MUSCLES = PROJECT_DIR / "meshes" / "face.muscles.yaml"
-#: The Hopper face (468 vertices, the scale of the thesis's HIGEM), which also simulates
-#: ICT FaceKit's head (facesim.head); the head and its muscles.
-HOPPER_MESH = PROJECT_DIR / "meshes" / "face.obj"
-HEAD = PROJECT_DIR / "meshes" / "ict" / "head.npz"
-HEAD_MUSCLES = PROJECT_DIR / "meshes" / "ict" / "head.muscles.yaml"
+
+
+def _data(name: str) -> Path:
+    """A data directory shipped with facesim: inside the package when installed from a
+    wheel (pyproject.toml maps meshes/ and expressions/ there), beside it in a checkout."""
+    installed = PACKAGE_DIR / name
+    return installed if installed.is_dir() else PROJECT_DIR / name
+
+
+MESHES = _data("meshes")
+#: The library of expression specs (happy, surprise, ...), found by name from any spec.
+LIBRARY = _data("expressions")
+#: The default face: ICT FaceKit's head (facesim.head), simulated through the Hopper face.
+HEAD = MESHES / "ict" / "head.npz"
+HEAD_MUSCLES = MESHES / "ict" / "head.muscles.yaml"
+#: The Hopper face (468 vertices, the scale of the thesis's HIGEM): the thesis's timing
+#: tables, the simulation mesh of the head, and the frame `facesim mesh align` fits to.
+HOPPER_MESH = MESHES / "face.obj"
+HOPPER_MUSCLES = MESHES / "face.muscles.yaml"
+DEFAULT_MESH, DEFAULT_MUSCLES = HEAD, HEAD_MUSCLES
+
+
+def default_muscles(mesh: Path) -> Path:
+    """The muscle file a mesh takes when a spec names none: the head's for a head, the
+    Hopper face's (by MediaPipe landmark index) for any other mesh."""
+    return HEAD_MUSCLES if mesh.suffix == ".npz" else HOPPER_MUSCLES
 
 #: Below this muscle falloff δ (eq. 3.4) a vertex is outside the region of influence and
 #: the flood fill of section 3.3 does not grow through it.

@@ -13,7 +13,9 @@ the number of workers or the order they finish in:
 - with ``jitter``: the camera turned by a yaw uniform in [-15, 15] and a pitch in [-8, 8]
   degrees, the lights scaled by a factor uniform in [0.8, 1.2], and the head and eyes
   turned (``POSE_JITTER``: head yaw ±20, pitch ±10, roll ±8, gaze yaw ±15, pitch ±10
-  degrees, each uniform).
+  degrees, each uniform), and a new person: the head's identity from a seed drawn
+  uniformly (facesim.head: weights of ICT's 100 modes from the standard normal), recorded
+  in the label with its weights.
 
 Each sample is simulated for 20 frames (the activations easing in over 10) and its last
 frame rendered (with ``clip``, every frame too, as ``clips/<id>.mp4``). It is written atomically as ``images/<id>.png`` and ``labels/<id>.json``
@@ -47,6 +49,8 @@ BASIC = ("happy", "sad", "angry", "fear", "disgust", "surprise")
 FRAMES, ONSET = 20, 10
 #: The largest head and gaze angle drawn with ``jitter`` (degrees), in facesim.spec.POSE order.
 POSE_JITTER = {"head_yaw": 20.0, "head_pitch": 10.0, "head_roll": 8.0, "gaze_yaw": 15.0, "gaze_pitch": 10.0}
+#: With ``jitter`` each sample is a new person: an identity seed drawn below this.
+IDENTITY_SEEDS = 2**31
 
 
 @dataclass(frozen=True)
@@ -76,6 +80,7 @@ def sample(seed: int, index: int, available_aus: list[str]) -> dict:
         draw["aus"] = {au: round(float(rng.uniform(0.3, 1.0)), 4) for au in sorted(chosen)}
     draw["yaw"], draw["pitch"], draw["light"] = rng.uniform(-15, 15), rng.uniform(-8, 8), rng.uniform(0.8, 1.2)
     draw.update({name: rng.uniform(-limit, limit) for name, limit in POSE_JITTER.items()})
+    draw["identity"] = int(rng.integers(IDENTITY_SEEDS))
     return draw
 
 
@@ -99,6 +104,7 @@ def sample_id(index: int) -> str:
 def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
     """Draw, simulate, render and write sample ``index``; returns its id. Skips a
     finished sample."""
+    from .head import identity_weights
     from .simulate import model_for, simulate
     from .spec import Spec
 
@@ -109,13 +115,13 @@ def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
         return sid
     probe = Spec(frames=FRAMES, onset=ONSET)
     draw = sample(settings.seed, index, available_action_units(model_for(probe).muscles.names))
-    if draw["expression"]:
-        spec = Spec(frames=FRAMES, onset=ONSET, expressions={draw["expression"]: draw["intensity"]})
-    else:
-        spec = Spec(frames=FRAMES, onset=ONSET, aus=draw["aus"])
+    identity = draw["identity"] if settings.jitter else None
+    what = {"expressions": {draw["expression"]: draw["intensity"]}} if draw["expression"] else {"aus": draw["aus"]}
+    spec = Spec(frames=FRAMES, onset=ONSET, identity=identity, **what)
     label = {"id": sid, "index": index, "seed": settings.seed, "expression": draw["expression"],
              "intensity": draw["intensity"], "aus": draw["aus"], "width": settings.width, "height": settings.height,
-             "frames": FRAMES, "dt": spec.dt}
+             "frames": FRAMES, "dt": spec.dt, "identity": identity,
+             "identity_weights": [] if identity is None else [round(float(w), 6) for w in identity_weights(identity)]}
     try:
         animation = simulate(spec)
     except SimulationError as exc:  # recorded, not fatal: the same draw fails the same way anywhere
@@ -135,18 +141,18 @@ def _render_sample(root: Path, sid: str, animation, draw: dict, settings: Datase
     from .render import RenderSettings, shared_renderer
 
     renderer = shared_renderer(animation.rest, animation.faces, RenderSettings(settings.width, settings.height),
-                               settings.backend)
+                               settings.backend, animation.figure)
     yaw, pitch, light = (draw[k] if settings.jitter else v for k, v in (("yaw", 0.0), ("pitch", 0.0), ("light", 1.0)))
     renderer.view(yaw, pitch, light)
     pose = {name: float(draw[name]) if settings.jitter else 0.0 for name in POSE_JITTER}
     if settings.clip:
         from .output import write_frames
 
-        frames = np.stack([renderer.render(p, pose=tuple(pose.values())) for p in animation.positions])
+        frames = np.stack([renderer.frame(animation, k, pose=tuple(pose.values())) for k in range(animation.frames)])
         write_frames(frames, root / "clips" / f"{sid}.mp4", "mp4", animation.fps)
         image = frames[-1]
     else:
-        image = renderer.render(animation.positions[-1], pose=tuple(pose.values()))
+        image = renderer.frame(animation, animation.frames - 1, pose=tuple(pose.values()))
     buffer = io.BytesIO()
     iio.imwrite(buffer, image, extension=".png")
     png = buffer.getvalue()
@@ -237,7 +243,7 @@ def write_manifest(directory: Path) -> Path:
     rows = [{**r, "aus": json.dumps(r["aus"], sort_keys=True), "activations": json.dumps(r["activations"], sort_keys=True)}
             for r in labels]
     columns = ["id", "index", "seed", "status", "expression", "intensity", "aus", "activations", "yaw", "pitch", "light",
-               *POSE_JITTER, "width", "height", "frames", "dt", "image", "sha256", "clip"]
+               *POSE_JITTER, "identity", "width", "height", "frames", "dt", "image", "sha256", "clip"]
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq
@@ -246,11 +252,11 @@ def write_manifest(directory: Path) -> Path:
         with atomic_path(path) as tmp, tmp.open("w", newline="") as handle:
             writer = csv.DictWriter(handle, fieldnames=columns)
             writer.writeheader()
-            writer.writerows({k: r[k] for k in columns} for r in rows)
+            writer.writerows({k: r.get(k) for k in columns} for r in rows)
         return path
     path = directory / "manifest.parquet"
     with atomic_path(path) as tmp:
-        pq.write_table(pa.Table.from_pylist([{k: r[k] for k in columns} for r in rows]), tmp)
+        pq.write_table(pa.Table.from_pylist([{k: r.get(k) for k in columns} for r in rows]), tmp)
     return path
 
 

@@ -39,9 +39,11 @@ IDENTITY_MODES = 100
 class Head:
     """One person's head. vertices : (N, 3) float64 cm; triangles : (t, 3) int64;
     triangle_material : (t,) int; materials : names; parts : name -> (first, last)
-    inclusive vertex range; uv : (u, 2); triangle_uv : (t, 3); identity : (100,) weights."""
+    inclusive vertex range; uv : (u, 2); triangle_uv : (t, 3); identity : (100,) weights;
+    neutral : (N, 3) the generic head this one is the identity of."""
 
     vertices: np.ndarray
+    neutral: np.ndarray
     triangles: np.ndarray
     triangle_material: np.ndarray
     materials: tuple[str, ...]
@@ -80,11 +82,16 @@ class Head:
 
     def simulation_mesh(self, mask: FaceMesh) -> "HeadMesh":
         """The simulated skin: ``mask`` (a face of MediaPipe's topology, the Hopper face)
-        brought onto the head by the similarity that best fits its landmarks to the head's."""
+        brought onto the head by the similarity that best fits its landmarks to the head's,
+        then made exactly symmetric about x = 0 (the fit leaves it 1e-5 cm off, enough to
+        make left and right muscles differ by round-off)."""
         from .align import similarity
+        from .mesh import mirror_map
 
         scale, rotation, translation = similarity(mask.vertices, self.landmark_positions)
-        return HeadMesh(scale * mask.vertices @ rotation.T + translation, mask.faces, self)
+        placed = scale * mask.vertices @ rotation.T + translation
+        placed = 0.5 * (placed + placed[mirror_map(placed, mask.faces)] * np.array([-1.0, 1.0, 1.0]))
+        return HeadMesh(placed, mask.faces, self)
 
     def eyeball(self, side: str) -> tuple[np.ndarray, float]:
         """Centre (3,) and radius of the eyeball on ``side`` ('left' or 'right'): the
@@ -144,14 +151,16 @@ def load_head(path: str | Path, identity: int | list[float] | tuple[float, ...] 
         raise InputError(f"{path}: head archive not found")
     data = _archive(path)
     weights = identity_weights(list(identity) if isinstance(identity, tuple) else identity)
-    vertices = data["neutral"].astype(np.float64)
+    neutral = data["neutral"].astype(np.float64)
+    vertices = neutral
     if weights.any():
         deltas = _identity_deltas(path)
         used = np.flatnonzero(weights)
-        vertices = vertices + np.tensordot(weights[used], deltas[used].astype(np.float32), axes=1)
+        vertices = neutral + np.tensordot(weights[used], deltas[used].astype(np.float32), axes=1)
     parts = {str(n): (int(a), int(b)) for n, (a, b) in zip(data["part_names"], data["part_ranges"])}
     return Head(
         vertices=vertices,
+        neutral=neutral,
         triangles=data["triangles"].astype(np.int64),
         triangle_material=data["triangle_material"].astype(np.int64),
         materials=tuple(str(m) for m in data["materials"]),

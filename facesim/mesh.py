@@ -243,6 +243,8 @@ def load_mesh(path: str | Path, identity=None) -> FaceMesh:
         from .head import load_head
 
         return load_head(path, identity).simulation_mesh(load_mesh(HOPPER_MESH))
+    if identity is not None:
+        raise InputError(f"identity: only a head (.npz, such as the default) has identities, not {path}")
     try:
         if path.suffix.lower() == ".obj":
             vertices, faces = _read_obj(path)

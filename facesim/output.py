@@ -71,10 +71,10 @@ def arrows_for(animation: Animation) -> np.ndarray | None:
     ])
 
 
-def _render_chunk(rest, faces, settings, backend, positions, arrows, pose):
+def _render_chunk(rest, faces, settings, backend, figure, positions, arrows, pose, jaw):
     """Frames rendered in a worker process, by the process's one shared renderer."""
-    renderer = shared_renderer(rest, faces, settings, backend)
-    return np.stack([renderer.render(p, None if arrows is None else arrows[k], None if pose is None else pose[k])
+    renderer = shared_renderer(rest, faces, settings, backend, figure)
+    return np.stack([renderer.render(p, None if arrows is None else arrows[k], None if pose is None else pose[k], jaw[k])
                      for k, p in enumerate(positions)])
 
 
@@ -90,11 +90,11 @@ def render_frames(animation: Animation, settings: RenderSettings, backend: str =
     frames = animation.frames
     if jobs <= 1 or frames < 2 * jobs:
         own = renderer is None
-        renderer = renderer or FaceRenderer(animation.rest, animation.faces, settings, backend, animation.figure)
+        renderer = renderer or FaceRenderer.of(animation, settings, backend)
         try:
             out = []
-            for k, p in enumerate(animation.positions):
-                out.append(renderer.render(p, None if arrows is None else arrows[k], animation.pose_at(k), animation.jaw_at(k)))
+            for k in range(frames):
+                out.append(renderer.frame(animation, k, None if arrows is None else arrows[k]))
                 if progress:
                     progress(1)
             return np.stack(out)
@@ -103,9 +103,9 @@ def render_frames(animation: Animation, settings: RenderSettings, backend: str =
                 renderer.close()
     bounds = np.linspace(0, frames, jobs * 2 + 1).astype(int)
     pose = animation.pose
-    chunks = [(animation.positions[a:b], None if arrows is None else arrows[a:b], None if pose is None else pose[a:b])
-              for a, b in zip(bounds[:-1], bounds[1:])]
-    fixed = [(animation.rest, animation.faces, settings, backend)] * len(chunks)
+    chunks = [(animation.positions[a:b], None if arrows is None else arrows[a:b], None if pose is None else pose[a:b],
+               animation.jaw[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+    fixed = [(animation.rest, animation.faces, settings, backend, animation.figure)] * len(chunks)
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
         out = []
         for (positions, *_), images in zip(chunks, pool.map(_render_chunk, *zip(*fixed), *zip(*chunks))):

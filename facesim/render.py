@@ -41,6 +41,9 @@ SCLERA = (0.95, 0.94, 0.92, 1.0)
 IRIS = (0.28, 0.42, 0.52, 1.0)
 PUPIL = (0.03, 0.03, 0.03, 1.0)
 ARROW = (0.85, 0.05, 0.05, 1.0)
+WIRE = (0.12, 0.14, 0.22, 1.0)
+#: A head's wireframe is drawn this far (cm) in front of the skin, toward the camera.
+WIRE_LIFT = 0.15
 KEY_LIGHT, FILL_LIGHT = 3.2, 1.3
 #: Height of the head's pivot (the atlanto-occipital joint) above the chin, in face heights.
 NECK_HEIGHT = 0.25
@@ -199,14 +202,10 @@ class FaceRenderer:
             self._add_figure(scene, figure, pyrender)
             self._neck = figure.neck
             framed = figure.rest
-        self._arrows = None
-        if settings.show_muscles:
-            lines = np.repeat(rest, 2, axis=0)
-            self._arrows = pyrender.Primitive(
-                positions=lines, mode=pyrender.constants.GLTF.LINES,
-                material=pyrender.MetallicRoughnessMaterial(baseColorFactor=ARROW, emissiveFactor=ARROW[:3]),
-            )
-            scene.add(pyrender.Mesh([self._arrows]), parent_node=self._head)
+        self._arrows = self._lines(scene, np.repeat(rest, 2, axis=0), ARROW) if settings.show_muscles else None
+        # A head's wireframe is its simulation mesh, drawn over the skin it drives.
+        self._edges = FaceMesh(rest, faces).edges if figure is not None and settings.wireframe else None
+        self._wire = None if self._edges is None else self._lines(scene, rest[self._edges.ravel()], WIRE)
 
         centre = (framed.min(axis=0) + framed.max(axis=0)) / 2
         extent = np.ptp(framed, axis=0)
@@ -216,6 +215,7 @@ class FaceRenderer:
         eye = centre + distance * np.array([-np.sin(yaw), 0.0, np.cos(yaw)])
         camera = pyrender.PerspectiveCamera(yfov=fov, aspectRatio=settings.width / settings.height, znear=1.0, zfar=10 * distance)
         self._centre, self._distance, self._yaw = centre, distance, yaw
+        self._toward_camera = WIRE_LIFT * (eye - centre) / np.linalg.norm(eye - centre)
         self._camera = scene.add(camera, pose=_look_at(eye, centre))
         self._lights = [
             scene.add(pyrender.DirectionalLight(color=(1.0, 0.97, 0.92), intensity=KEY_LIGHT),
@@ -233,8 +233,17 @@ class FaceRenderer:
             ) from None
         if not settings.antialias:
             _single_sample(self._renderer._renderer)
-        self._flags = pyrender.RenderFlags.ALL_WIREFRAME if settings.wireframe else pyrender.RenderFlags.NONE
+        wireframe = settings.wireframe and figure is None
+        self._flags = pyrender.RenderFlags.ALL_WIREFRAME if wireframe else pyrender.RenderFlags.NONE
         self._renderer.render(self._scene, flags=self._flags)  # uploads the buffers once
+
+    def _lines(self, scene, points: np.ndarray, colour) -> "pyrender.Primitive":
+        """Line segments (point pairs) in one unlit colour, moved with the head."""
+        pyrender = self._pyrender
+        lines = pyrender.Primitive(positions=points, mode=pyrender.constants.GLTF.LINES,
+                                   material=pyrender.MetallicRoughnessMaterial(baseColorFactor=colour, emissiveFactor=colour[:3]))
+        scene.add(pyrender.Mesh([lines]), parent_node=self._head)
+        return lines
 
     def _add_figure(self, scene, figure, pyrender) -> None:
         """One primitive per part of the figure, each over its own vertices, coloured per
@@ -315,12 +324,24 @@ class FaceRenderer:
             for primitive, rows in self._parts:
                 self._upload(primitive, np.hstack([scene[rows], self._normals[rows], self._figure.colour[rows]]).astype(np.float32))
             positions = scene[self._figure.anchor]
+            if self._wire is not None:  # a hair in front of the skin, toward the camera
+                self._upload(self._wire, (positions[self._edges.ravel()] + self._toward_camera).astype(np.float32))
         if self._arrows is not None:
             vectors = np.zeros_like(positions) if arrows is None else arrows
             lines = np.stack([positions, positions + vectors], axis=1).reshape(-1, 3).astype(np.float32)
             self._upload(self._arrows, lines)
         colour, _ = self._renderer.render(self._scene, flags=self._flags)
         return colour
+
+    def frame(self, animation, k: int, arrows: np.ndarray | None = None, pose=None) -> np.ndarray:
+        """Frame ``k`` of a facesim.simulate.Animation: its positions, jaw and pose (or
+        ``pose`` instead)."""
+        return self.render(animation.positions[k], arrows, animation.pose_at(k) if pose is None else pose, animation.jaw_at(k))
+
+    @classmethod
+    def of(cls, animation, settings: RenderSettings, backend: str = "auto") -> "FaceRenderer":
+        """A renderer of the face (or head) an animation was simulated on."""
+        return cls(animation.rest, animation.faces, settings, backend, animation.figure)
 
     def close(self) -> None:
         if getattr(self, "_renderer", None) is not None:
@@ -351,10 +372,12 @@ def probe(backend: str) -> str:
 _shared: dict = {}
 
 
-def shared_renderer(rest: np.ndarray, faces: np.ndarray, settings: RenderSettings, backend: str = "auto") -> FaceRenderer:
-    """One renderer per process for each face and settings, kept for every later call:
-    how batch and dataset workers reuse their context across many specs or samples."""
-    key = (rest.tobytes(), faces.tobytes(), settings, backend)
+def shared_renderer(rest: np.ndarray, faces: np.ndarray, settings: RenderSettings, backend: str = "auto",
+                    figure=None) -> FaceRenderer:
+    """One renderer per process for each face (or head figure) and settings, kept for
+    every later call: how batch and dataset workers reuse their context across many specs
+    or samples."""
+    key = (rest.tobytes(), faces.tobytes(), settings, backend, None if figure is None else id(figure))
     if key not in _shared:
-        _shared[key] = FaceRenderer(rest, faces, settings, backend)
+        _shared[key] = FaceRenderer(rest, faces, settings, backend, figure)
     return _shared[key]

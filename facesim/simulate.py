@@ -9,6 +9,7 @@ that blows up raises :class:`SimulationError` naming the frame and the vertex or
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -58,8 +59,15 @@ class Animation:
 
     def jaw_at(self, frame: int) -> float:
         """The jaw's angle (radians) at a frame: its activation times its largest angle."""
+        return float(self.jaw[frame])
+
+    @property
+    def jaw(self) -> np.ndarray:
+        """(frames,) the jaw's angle (radians): its activation times its largest angle."""
         rig = None if self.model is None else self.model.rig
-        return 0.0 if rig is None or rig.jaw_column < 0 else float(self.activations[frame, rig.jaw_column] * rig.jaw_max)
+        if rig is None or rig.jaw_column < 0:
+            return np.zeros(self.frames)
+        return self.activations[:, rig.jaw_column] * rig.jaw_max
 
     @property
     def figure(self):
@@ -95,12 +103,14 @@ def model_for(spec: Spec) -> Model:
     return _model(spec.mesh_path.resolve(), spec.muscles_path.resolve(), spec.material, _identity_key(spec.identity))
 
 
-_figures: dict[int, tuple] = {}
+#: Figures kept per process (a dataset of many identities keeps only the latest).
+FIGURE_CACHE = 4
+_figures: "OrderedDict[int, tuple]" = OrderedDict()
 
 
 def figure_for(model: Model):
-    """What the renderer draws for a model: a head's figure (built once per model: the
-    biharmonic weights take a second), or None for a face mask."""
+    """What the renderer draws for a model: a head's figure (built once per model), or
+    None for a face mask."""
     from .figure import head_figure
     from .head import HeadMesh
 
@@ -108,6 +118,9 @@ def figure_for(model: Model):
         return None
     if id(model) not in _figures:
         _figures[id(model)] = (model, head_figure(model.mesh.head, model))  # the model kept alive with its key
+        while len(_figures) > FIGURE_CACHE:
+            _figures.popitem(last=False)
+    _figures.move_to_end(id(model))
     return _figures[id(model)][1]
 
 

@@ -14,7 +14,8 @@ time step. A spec is a YAML file validated by pydantic (unknown fields are error
     include: [{spec: happy, weight: 0.6}]   # blends of other specs
     sequence: [...]             # expressions one after another
     material: {damping: 40}     # optional overrides of facesim.model.Material
-    mesh: my_face.obj           # optional, relative to the spec (default: meshes/face.obj)
+    mesh: my_face.obj           # optional, relative to the spec (default: ICT's head, meshes/ict/head.npz)
+    identity: 3                 # the head's identity: a seed, or weights of its 100 modes
     muscles: my_face.muscles.yaml
 
 ``load_spec`` checks the file alone; ``activation_table`` checks the muscle names against
@@ -32,7 +33,7 @@ from typing import Literal
 
 from pydantic import Field, PrivateAttr, ValidationError, field_validator, model_validator
 
-from .config import DEFAULT_MESH, DEFAULT_MUSCLES, PROJECT_DIR
+from .config import DEFAULT_MESH, LIBRARY, default_muscles
 from .errors import InputError
 from .model import Material
 from .muscles import MuscleSet
@@ -46,7 +47,6 @@ MAX_FRAMES = 100_000
 #: MPEG-4's six high-level expressions (with FACS/Ekman names as aliases) and their specs.
 EKMAN = {"joy": "happy", "happy": "happy", "sadness": "sad", "sad": "sad", "anger": "angry", "angry": "angry",
          "fear": "fear", "disgust": "disgust", "surprise": "surprise"}
-LIBRARY = PROJECT_DIR / "expressions"
 
 
 class Envelope(Strict):
@@ -213,7 +213,7 @@ class Spec(Strict):
 
     @property
     def muscles_path(self) -> Path:
-        return self._relative(self.muscles, DEFAULT_MUSCLES)
+        return self._relative(self.muscles, default_muscles(self.mesh_path))
 
     def with_overrides(self, **changes) -> "Spec":
         """A copy with fields replaced (used by the CLI's --mesh, --muscles). A mesh or

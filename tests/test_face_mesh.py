@@ -5,10 +5,16 @@ import importlib.util
 import numpy as np
 import pytest
 
-from facesim.config import DEFAULT_MESH, DEFAULT_MUSCLES
+from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
 from facesim.errors import InputError
 from facesim.mesh import load_mesh, mirror_map
 from facesim.muscles import load_muscles
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    """These tests are about the committed Hopper face (the default head simulates it)."""
+    return load_mesh(HOPPER_MESH)
 
 HAS_MEDIAPIPE = importlib.util.find_spec("mediapipe") is not None
 needs_mediapipe = pytest.mark.skipif(not HAS_MEDIAPIPE, reason="MediaPipe not installed (pip install -e '.[photo]')")
@@ -76,7 +82,7 @@ def test_make_mesh_rebuilds_the_committed_face(tmp_path):
 
     photo = matplotlib.cbook.get_sample_data("grace_hopper.jpg", asfileobj=False)
     rebuilt = mesh_from_photo(photo, tmp_path / "face.obj")
-    committed = load_mesh(DEFAULT_MESH)
+    committed = load_mesh(HOPPER_MESH)
     assert np.array_equal(rebuilt.faces, committed.faces)
     assert np.abs(rebuilt.vertices - committed.vertices).max() <= 1e-4
 
@@ -109,7 +115,7 @@ def test_a_second_photo_gives_a_valid_mesh_that_carries_the_default_muscles(tmp_
     assert [len(loop) for loop in loaded.boundary_loops] == [36, 20, 16, 16]
     assert (loaded.face_normals[:, 2] > 0).mean() >= 0.95
     assert np.abs(loaded.vertices - mesh.vertices).max() < 1e-5
-    muscles = load_muscles(DEFAULT_MUSCLES, loaded)
+    muscles = load_muscles(HOPPER_MUSCLES, loaded)
     assert muscles.count == 30 and muscles.controls == ("jaw", "eyelid_r", "eyelid_l")
 
 
@@ -137,7 +143,7 @@ def run_mesh_info(path):
 
 
 def test_mesh_info_on_the_default_face():
-    result = run_mesh_info(DEFAULT_MESH)
+    result = run_mesh_info(HOPPER_MESH)
     assert result.returncode == 0
     assert "468 vertices, 852 triangles" in result.stdout and "[36, 20, 16, 16]" in result.stdout
     assert "fits by landmark index" in result.stdout and "ok: usable" in result.stdout

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import yaml
 
-from facesim.config import DEFAULT_MUSCLES
+from facesim.config import HOPPER_MUSCLES
 from facesim.errors import InputError
 from facesim.muscles import LINEAR, load_muscles
 
@@ -52,7 +52,7 @@ def test_attachments_and_outer_rim_are_pinned_insertions_are_not(mesh, muscles):
 
 
 def write_muscles(tmp_path, change):
-    data = yaml.safe_load(DEFAULT_MUSCLES.read_text())
+    data = yaml.safe_load(HOPPER_MUSCLES.read_text())
     change(data)
     path = tmp_path / "bad.muscles.yaml"
     path.write_text(yaml.safe_dump(data))

@@ -8,7 +8,7 @@ import yaml
 import facesim
 from facesim.simulate import model_for
 from conftest import EXPRESSIONS
-from facesim.config import DEFAULT_MESH, DEFAULT_MUSCLES
+from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
 from facesim.mesh import load_mesh, subdivide, write_obj
 from facesim.muscles import MuscleFile, muscles_as_points
 from facesim.schema import load_model
@@ -22,9 +22,9 @@ def subdivided(tmp_path_factory):
     """The default face Loop-subdivided once (its first 468 vertices are the originals,
     smoothed) and the default muscle file carried to it by position."""
     root = tmp_path_factory.mktemp("sub1")
-    base = load_mesh(DEFAULT_MESH)
+    base = load_mesh(HOPPER_MESH)
     write_obj(root / "face.obj", subdivide(base, 1))
-    carried = muscles_as_points(load_model(DEFAULT_MUSCLES, MuscleFile), base)
+    carried = muscles_as_points(load_model(HOPPER_MUSCLES, MuscleFile), base)
     (root / "face.muscles.yaml").write_text(yaml.safe_dump(carried.model_dump(mode="json")))
     return root / "face.obj", root / "face.muscles.yaml"
 
@@ -35,7 +35,7 @@ def on(spec, mesh_and_muscles):
 
 
 def test_the_material_scales_with_the_skin_area_per_vertex(subdivided):
-    spec = load_spec(EXPRESSIONS / "sad.yaml")
+    spec = load_spec(EXPRESSIONS / "sad.yaml").with_overrides(mesh=HOPPER_MESH)
     default = model_for(spec)
     assert default.resolution == 1.0 and default.material == spec.material
     fine = model_for(on(spec, subdivided))
@@ -59,7 +59,7 @@ def astronaut(tmp_path_factory):
     root = tmp_path_factory.mktemp("astronaut")
     iio.imwrite(root / "astronaut.png", data.astronaut())
     mesh_from_photo(root / "astronaut.png", root / "astronaut.obj")
-    return root / "astronaut.obj", DEFAULT_MUSCLES
+    return root / "astronaut.obj", HOPPER_MUSCLES
 
 
 @pytest.mark.parametrize("name", THESIS_EXPRESSIONS)
@@ -117,7 +117,7 @@ def test_landmarks_are_proposed_by_nearest_vertex_on_an_upright_mesh(tmp_path, s
 
     fine = load_mesh(subdivided[0])
     scan = FaceMesh(turned(fine.vertices, 0.0, 0.0), fine.faces)  # millimetres, moved, but upright
-    proposal = propose_landmarks(scan, load_mesh(DEFAULT_MESH))
+    proposal = propose_landmarks(scan, load_mesh(HOPPER_MESH))
     found = [proposal[n][0] == i for n, i in NAMED_LANDMARKS.items()]
     assert np.mean(found) >= 0.75
 
@@ -133,6 +133,6 @@ def test_bad_landmark_files_are_one_line_errors(tmp_path, landmarks, message):
 
     path = tmp_path / "landmarks.yaml"
     path.write_text(yaml.safe_dump(landmarks))
-    result = cli("mesh", "align", DEFAULT_MESH, "--landmarks", path, "-o", tmp_path / "out.obj")
+    result = cli("mesh", "align", HOPPER_MESH, "--landmarks", path, "-o", tmp_path / "out.obj")
     assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr
     assert result.stderr.strip().count("\n") == 0 and not (tmp_path / "out.obj").exists()

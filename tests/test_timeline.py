@@ -6,7 +6,7 @@ import yaml
 
 import facesim
 from conftest import EXPRESSIONS
-from facesim.config import DEFAULT_MUSCLES
+from facesim.config import HOPPER_MUSCLES
 from facesim.errors import InputError
 from facesim.muscles import MuscleFile, resolve_muscles
 from facesim.simulate import model_for
@@ -100,7 +100,7 @@ def test_action_units_drive_their_muscles_with_facs_letters(tmp_path, muscles):
 
 
 def test_an_action_unit_without_its_muscles_is_an_error(tmp_path, mesh):
-    data = yaml.safe_load(DEFAULT_MUSCLES.read_text())
+    data = yaml.safe_load(HOPPER_MUSCLES.read_text())
     data["muscles"] = [m for m in data["muscles"] if not m["name"].startswith("orbicularis_oculi")]
     del data["jaw"]
     stripped = resolve_muscles(MuscleFile.model_validate(data), mesh)
