@@ -14,9 +14,12 @@ from .render import RenderSettings, shared_renderer
 
 
 def collect_specs(inputs: list[Path]) -> list[Path]:
-    """Spec files from files and directories (their *.yaml, sorted), in order given."""
+    """Spec files from files and directories (their *.yaml, sorted), in order given; a
+    bare name that is no file here is a spec of the library (``happy``)."""
+    from .spec import library_spec
+
     specs: list[Path] = []
-    for item in inputs:
+    for item in map(library_spec, inputs):
         if item.is_dir():
             found = sorted(item.glob("*.yaml")) + sorted(item.glob("*.yml"))
             if not found:

@@ -238,9 +238,21 @@ class Spec(Strict):
         raise InputError(f"{self.source}: {name!r} is neither a muscle, an action unit, nor an expression spec")
 
 
-def load_spec(path: str | Path) -> Spec:
-    """Read and validate an expression spec (one-line InputError on any problem)."""
+def library_spec(path: str | Path) -> Path:
+    """``path`` itself, or, when no such file exists and it is a bare name (``happy``,
+    ``surprise.yaml``), that spec of the library shipped with facesim."""
     path = Path(path)
+    if not path.exists() and path.parent == Path("."):
+        known = LIBRARY / (path.name if path.suffix in (".yaml", ".yml") else f"{EKMAN.get(path.name, path.name)}.yaml")
+        if known.is_file():
+            return known
+    return path
+
+
+def load_spec(path: str | Path) -> Spec:
+    """Read and validate an expression spec (one-line InputError on any problem): a file,
+    or a name of the library (``happy``)."""
+    path = library_spec(path)
     spec = load_model(path, Spec)
     spec._source = path
     return spec
