@@ -44,8 +44,8 @@ CARUNCLE = (0.78, 0.50, 0.48, 1.0)
 #: transparency and shadowing and are hidden.
 HEAD_PARTS = {
     "M_Face": (None, 0.75), "M_BackHead": (None, 0.75), "M_GumsTongue": (GUMS, 0.4), "M_Teeth": (TEETH, 0.3),
-    "M_ScleraLeft": (SCLERA, 0.2), "M_ScleraRight": (SCLERA, 0.2), "M_IrisLeft": (IRIS, 0.2),
-    "M_IrisRight": (IRIS, 0.2), "M_EyeLashes": (LASHES, 0.9),
+    "M_ScleraLeft": (SCLERA, 0.2), "M_ScleraRight": (SCLERA, 0.2), "M_IrisLeft": (None, 0.2),
+    "M_IrisRight": (None, 0.2), "M_EyeLashes": (LASHES, 0.9),
 }
 #: The skin inside the mouth (the socket) darkens with depth behind the lips (cm).
 MOUTH_DEPTH = 1.5
@@ -56,8 +56,11 @@ EAR_Z, EAR_ABOVE_Y, NECK_Y = 3.0, -3.5, -11.0
 HEAD_NECK = (0.0, -1.5, 0.0)
 #: Follow weights smaller than this are dropped (skin_follow).
 FOLLOW_TOLERANCE = 1e-4
-#: Pupil radius (cm) on ICT's iris.
-PUPIL_RADIUS = 0.22
+#: Eyelashes (upper, lower): opacity at the lid margin and length over which they fade (cm).
+LASH_ALPHA, LASH_LENGTH = (0.9, 0.35), (0.7, 0.4)
+#: Pupil and iris radii (cm), and the width of the iris's darker limbal ring: an adult
+#: iris is about 11.7 mm across.
+PUPIL_RADIUS, IRIS_RADIUS, LIMBUS = 0.2, 0.585, 0.1
 
 
 @dataclass(frozen=True)
@@ -253,12 +256,13 @@ def head_figure(head: Head, model) -> Figure:
         if HEAD_PARTS[material][0] is not None:
             colour[np.unique(tri)] = HEAD_PARTS[material][0]
         parts.append(Part(material, tri, HEAD_PARTS[material][1]))
+    colour[:, 3] = 1.0
+    for side in ("left", "right"):
+        colour[head.part(f"eyelashes_{side}"), 3] = _lash_alpha(x, head, side)
     for side in ("left", "right"):
         ball = head.part(f"eyeball_{side}")
-        _, radius = head.eyeball(side)
-        centre, axis, iris = _iris_axis(x, head, side)
-        off_axis = np.linalg.norm(np.cross(x[iris] - centre, axis), axis=1)
-        colour[iris[off_axis < PUPIL_RADIUS]] = PUPIL
+        centre, radius = head.eyeball(side)
+        colour[_iris_axis(x, head, side)[2]] = _eye_colour(x, head, side)
         eyes.append((ball, centre))
         near = np.flatnonzero(np.linalg.norm(x[:n_face] - centre, axis=1) < 1.6 * radius)
         distance = np.linalg.norm(x[near] - centre, axis=1)
@@ -271,19 +275,49 @@ def head_figure(head: Head, model) -> Figure:
 
 
 def _iris_axis(x: np.ndarray, head: Head, side: str):
-    """The eye's centre, the unit axis through its iris, and the iris's vertices."""
+    """The eye's centre, its unit optical axis (toward the apex of the cornea: the front
+    sclera vertices farthest from the centre) and the vertices of its inner sphere."""
     centre, _ = head.eyeball(side)
-    iris = np.unique(head.triangles_of(f"M_Iris{side.title()}"))
-    axis = x[iris].mean(axis=0) - centre
-    return centre, axis / np.linalg.norm(axis), iris
+    sclera = np.unique(head.triangles_of(f"M_Sclera{side.title()}"))
+    d = x[sclera] - centre
+    reach = np.where(d[:, 2] > 0, np.linalg.norm(d, axis=1), 0.0)
+    axis = d[np.argsort(reach)[-20:]].mean(axis=0)
+    return centre, axis / np.linalg.norm(axis), np.unique(head.triangles_of(f"M_Iris{side.title()}"))
+
+
+def _lash_alpha(x: np.ndarray, head: Head, side: str) -> np.ndarray:
+    """(k,) opacity of ICT's eyelash cards (made for a hair texture with alpha): dense at
+    the lid margin, fading to nothing at the tips, the lower lashes sparser. Drawn solid,
+    the cards read as a dark band of eyeliner under the eye."""
+    from scipy.spatial import cKDTree
+
+    rows = head.part(f"eyelashes_{side}")
+    reach, _ = cKDTree(x[: head.face_count]).query(x[rows])  # from the skin they grow out of
+    centre, _ = head.eyeball(side)
+    upper = x[rows, 1] > centre[1]
+    length = np.where(upper, LASH_LENGTH[0], LASH_LENGTH[1])
+    return np.where(upper, LASH_ALPHA[0], LASH_ALPHA[1]) * np.clip(1 - reach / length, 0.0, 1.0) ** 1.5
+
+
+def _eye_colour(x: np.ndarray, head: Head, side: str) -> np.ndarray:
+    """(k, 4) colours of the eye's inner sphere (ICT's M_Iris, which a texture would paint
+    whole): a dark pupil on the axis, the iris around it darkening to a limbal ring at
+    IRIS_RADIUS, white sclera beyond; the back half, seen only through the pupil, dark."""
+    centre, axis, iris = _iris_axis(x, head, side)
+    d = x[iris] - centre
+    r = np.where(d @ axis > 0, np.linalg.norm(np.cross(d, axis), axis=1), np.inf)
+    limbus = np.clip((r - (IRIS_RADIUS - LIMBUS)) / LIMBUS, 0.0, 1.0)[:, None]
+    iris_colour = (1 - 0.55 * limbus) * np.array(IRIS) + 0.55 * limbus * np.array(PUPIL)
+    colour = np.where((r < IRIS_RADIUS)[:, None], iris_colour, np.array(SCLERA))
+    colour[(r < PUPIL_RADIUS) | (d @ axis <= 0)] = PUPIL
+    return colour
 
 
 def _over_iris(x: np.ndarray, head: Head, side: str, triangles: np.ndarray) -> np.ndarray:
-    """(t,) which sclera triangles lie in front of the iris (the cornea)."""
-    centre, axis, iris = _iris_axis(x, head, side)
-    radius = np.linalg.norm(np.cross(x[iris] - centre, axis), axis=1).max()
+    """(t,) which sclera triangles lie in front of the iris (the clear cornea)."""
+    centre, axis, _ = _iris_axis(x, head, side)
     points = x[triangles].mean(axis=1) - centre
-    return (points @ axis > 0) & (np.linalg.norm(np.cross(points, axis), axis=1) < radius)
+    return (points @ axis > 0) & (np.linalg.norm(np.cross(points, axis), axis=1) < IRIS_RADIUS + LIMBUS)
 
 
 def _components(triangles: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:

@@ -255,8 +255,10 @@ class FaceRenderer:
         self._parts = []
         for part in figure.parts:
             rows, local = np.unique(part.triangles, return_inverse=True)
+            see_through = bool((figure.colour[rows, 3] < 1).any())  # eyelashes fade to their tips
             material = pyrender.MetallicRoughnessMaterial(baseColorFactor=(1.0, 1.0, 1.0, 1.0), metallicFactor=0.0,
-                                                          roughnessFactor=part.roughness, doubleSided=True)
+                                                          roughnessFactor=part.roughness, doubleSided=True,
+                                                          alphaMode="BLEND" if see_through else "OPAQUE")
             primitive = pyrender.Primitive(positions=figure.rest[rows], normals=self._normals[rows], color_0=figure.colour[rows],
                                            indices=local.reshape(-1, 3), material=material)
             scene.add(pyrender.Mesh([primitive]), parent_node=self._head)
@@ -332,6 +334,16 @@ class FaceRenderer:
             self._upload(self._arrows, lines)
         colour, _ = self._renderer.render(self._scene, flags=self._flags)
         return colour
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """(k, 2) pixel coordinates (x right, y down) where points (k, 3) of the head at
+        rest pose appear in the frame."""
+        camera = self._camera.camera
+        pose = self._scene.get_pose(self._camera)
+        view = np.linalg.inv(pose)
+        clip = np.c_[points, np.ones(len(points))] @ (camera.get_projection_matrix(self.settings.width, self.settings.height) @ view).T
+        ndc = clip[:, :2] / clip[:, 3:4]
+        return np.column_stack([(ndc[:, 0] + 1) / 2 * self.settings.width, (1 - ndc[:, 1]) / 2 * self.settings.height])
 
     def frame(self, animation, k: int, arrows: np.ndarray | None = None, pose=None) -> np.ndarray:
         """Frame ``k`` of a facesim.simulate.Animation: its positions, jaw and pose (or

@@ -1,6 +1,8 @@
 """ICT FaceKit's head: vendored in ICT's vertex order, identities, the thesis expressions
 simulated on it, the jaw carrying the lower teeth, the lids meeting over the eyeballs."""
 
+import dataclasses
+import importlib.util
 import itertools
 
 import numpy as np
@@ -9,6 +11,7 @@ import pytest
 from conftest import THESIS_EXPRESSIONS, spec
 from facesim.config import HEAD, HEAD_MUSCLES
 from facesim.head import load_head
+from facesim.render import FaceRenderer, RenderSettings
 from facesim.simulate import figure_for, simulate
 
 #: Vertex positions read off the upstream generic_neutral_mesh.obj (its v lines 1, 5000,
@@ -84,3 +87,44 @@ def test_blink_meets_the_lids_outside_the_eyeballs(head):
         x = figure.positions(animation.positions[frame])
         for rows, centre, radius in figure.guards:
             assert (np.linalg.norm(x[rows] - centre, axis=1) >= radius - 1e-9).all()
+
+
+needs_mediapipe = pytest.mark.skipif(importlib.util.find_spec("mediapipe") is None,
+                                     reason="MediaPipe not installed (pip install -e '.[photo]')")
+#: MediaPipe's mouth corners, outer eye corners, nose tip and chin.
+FEATURES = {"mouth corners": [61, 291], "outer eye corners": [33, 263], "nose tip": [1], "chin": [152]}
+
+
+@needs_mediapipe
+def test_mediapipe_finds_the_default_head_where_its_points_project():
+    from facesim.photo import detect_landmarks
+
+    neutral = simulate(spec("happy", activations={}, frames=1))  # the default face, at rest
+    head = neutral.model.mesh.head
+    for camera in ("front", "three-quarter"):
+        with FaceRenderer.of(neutral, RenderSettings(512, 512, camera)) as renderer:
+            image = renderer.render(neutral.rest)
+            found = detect_landmarks(image, camera)  # raises when no face is found
+            if camera == "front":
+                for name, indices in FEATURES.items():
+                    projected = renderer.project(head.landmark_positions[indices])
+                    off = np.linalg.norm(found[indices, :2] - projected, axis=1) / 512
+                    assert off.max() < 0.02, (name, off)
+
+
+def _teeth_pixels(animation, frame: int) -> int:
+    """Pixels where the teeth show: the frame drawn with the teeth painted pure green."""
+    figure = animation.figure
+    colour = figure.colour.copy()
+    colour[animation.model.mesh.head.part("teeth")] = (0.0, 1.0, 0.0, 1.0)
+    painted = dataclasses.replace(figure, colour=colour)
+    with FaceRenderer(animation.rest, animation.faces, RenderSettings(512, 512), figure=painted) as renderer:
+        image = renderer.render(animation.positions[frame], jaw=animation.jaw_at(frame)).astype(int)
+    return int(((image[..., 1] > 2 * image[..., 0] + 20) & (image[..., 1] > 2 * image[..., 2] + 20)).sum())
+
+
+def test_teeth_show_in_the_rendered_mouth_when_the_jaw_opens():
+    opened = simulate(spec("happy", activations={"jaw": 1.0}, onset=15))
+    assert opened.jaw_at(opened.frames - 1) == pytest.approx(np.radians(20))
+    assert _teeth_pixels(opened, opened.frames - 1) > 50  # about 80 of the 512² frame (the whole head)
+    assert _teeth_pixels(opened, 0) < 20  # closed lips hide them
