@@ -27,18 +27,40 @@ def muscle_regions(model) -> list[np.ndarray]:
     return regions
 
 
-def plot_muscles(model, path: Path) -> None:
-    """The mesh from the front, every muscle an arrow from insertion to attachment, its
-    region of influence shaded."""
+def _front_view(model, backend: str) -> tuple[np.ndarray | None, np.ndarray]:
+    """What the muscle map is drawn over: for a head (facesim.figure), its front render and
+    where each simulated vertex shows on it, centred, y up, in pixels; for a mask, nothing
+    and its own x, y."""
+    from .simulate import figure_for
+
+    figure = figure_for(model)
+    if figure is None:
+        return None, model.rest_position[:, :2]
+    from .render import FaceRenderer, RenderSettings
+
+    settings = RenderSettings(900, 1000)
+    with FaceRenderer(model.rest_position, model.faces, settings, backend, figure) as renderer:
+        image = renderer.render(model.rest_position)
+        pixels = renderer.project(figure.rest[figure.anchor])
+    return image, np.column_stack([pixels[:, 0] - settings.width / 2, settings.height / 2 - pixels[:, 1]])
+
+
+def plot_muscles(model, path: Path, backend: str = "auto") -> None:
+    """The face from the front (a head rendered, a mask as its mesh), every muscle an
+    arrow from insertion to attachment, its region of influence shaded."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    x = model.rest_position
+    image, x = _front_view(model, backend)
     names = model.muscles.names
     fig, ax = plt.subplots(figsize=(9, 10))
-    ax.triplot(x[:, 0], x[:, 1], model.faces, color="0.75", lw=0.4)
+    if image is not None:
+        h, w = image.shape[:2]
+        ax.imshow(image, extent=(-w / 2, w / 2, -h / 2, h / 2))
+    ax.triplot(x[:, 0], x[:, 1], model.faces, color="0.75" if image is None else "white", lw=0.4,
+               alpha=1.0 if image is None else 0.35)
     cmap = plt.get_cmap("tab20")
     families = sorted({n.removesuffix("_l").removesuffix("_r") for n in names})
     for m, region in enumerate(muscle_regions(model)):
@@ -62,6 +84,11 @@ def plot_muscles(model, path: Path) -> None:
                     ha="right" if label_at[0] < 0 else "left", va="center")
     pinned = model.pinned
     ax.scatter(x[pinned, 0], x[pinned, 1], s=8, color="k", marker="s", label="pinned")
+    if image is not None:  # the face, not the whole head
+        low, high = x.min(axis=0), x.max(axis=0)
+        margin = 0.08 * (high - low)
+        ax.set_xlim(low[0] - margin[0], high[0] + margin[0])
+        ax.set_ylim(low[1] - margin[1], high[1] + margin[1])
     ax.set_aspect("equal")
     ax.set_axis_off()
     ax.set_title(f"{model.muscle_count} muscles: arrows from insertion to attachment, sphincter rings dashed, regions shaded")
