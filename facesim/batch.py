@@ -11,6 +11,7 @@ from pathlib import Path
 
 from .errors import FacesimError, InputError
 from .render import RenderSettings, shared_renderer
+from .workers import die_with_parent
 
 
 def collect_specs(inputs: list[Path]) -> list[Path]:
@@ -52,9 +53,12 @@ def render_one(spec_path: Path, output: Path, settings: RenderSettings, backend:
         animation = simulate(spec)
         renderer = None if output_kind(output) == "npz" else shared_renderer(animation.rest, animation.faces, settings, backend,
                                                                                     animation.figure)
-        return BatchResult(spec_path, report=write_animation(animation, output, settings, backend=backend, renderer=renderer))
+        return BatchResult(spec_path, report=write_animation(animation, output, settings, backend=backend, renderer=renderer,
+                                                             replace=force))
     except FacesimError as exc:
         return BatchResult(spec_path, error=str(exc))
+    except Exception as exc:  # a bug must not cost the other specs their results  # noqa: BLE001
+        return BatchResult(spec_path, error=f"{spec_path}: failed unexpectedly ({type(exc).__name__}: {exc})")
 
 
 def run_batch(specs: list[Path], outdir: Path, suffix: str, settings: RenderSettings, backend: str, jobs: int,
@@ -79,8 +83,12 @@ def run_batch(specs: list[Path], outdir: Path, suffix: str, settings: RenderSett
         for a in args:
             done(render_one(*a))
     else:
-        with ProcessPoolExecutor(min(jobs, len(args)), mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = [pool.submit(render_one, *a) for a in args]
+        with ProcessPoolExecutor(min(jobs, len(args)), mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=die_with_parent) as pool:
+            futures = {pool.submit(render_one, *a): a[0] for a in args}
             for future in as_completed(futures):
-                done(future.result())
+                try:
+                    done(future.result())
+                except Exception as exc:  # the worker process itself died (killed, out of memory)  # noqa: BLE001
+                    done(BatchResult(futures[future], error=f"{futures[future]}: its worker process died ({type(exc).__name__})"))
     return [results[s] for s in specs]

@@ -15,11 +15,17 @@ import numpy as np
 import typer
 
 from .errors import FacesimError, InputError
+from .workers import capped_jobs
+from .writers import Terminated, check_destination, handle_termination
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
                   help="Anatomy-based facial expression animation: simulate a muscle-driven face and render it offscreen.")
 mesh_app = typer.Typer(no_args_is_help=True, help="Face meshes: build one from a photo, check one.")
 app.add_typer(mesh_app, name="mesh")
+
+
+def notice(message: str) -> None:
+    typer.echo(f"facesim: {message}", err=True)
 
 
 def fail(message: str, code: int) -> None:
@@ -32,12 +38,15 @@ def handled(command):
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
+        handle_termination()
         try:
             return command(*args, **kwargs)
         except FacesimError as exc:
             fail(str(exc), exc.exit_code)
         except KeyboardInterrupt:
             fail("interrupted; nothing was written", 130)
+        except Terminated as exc:
+            fail(f"stopped by {exc}; nothing was written", 128 + exc.signum)
 
     return wrapper
 
@@ -99,6 +108,7 @@ def render(
     from .spec import blend_spec, load_spec
 
     positive(jobs, "--jobs")
+    jobs = capped_jobs(jobs, notice)
     if fps is not None and not 0 < fps <= 240:
         raise InputError(f"--fps: must be between 0 and 240, got {fps}")
     settings = settings_from(size, camera, wireframe, show_muscles, antialias)
@@ -112,7 +122,7 @@ def render(
     check_output(output, force, settings)
     animation = simulate(loaded)
     with progress_bar(animation.frames, f"rendering {loaded.title}") as advance:
-        report = write_animation(animation, output, settings, fps, backend, jobs, advance)
+        report = write_animation(animation, output, settings, fps, backend, jobs, advance, replace=force)
     compiled = " (the first run compiles the Numba kernels; later runs load them from cache)" if report.simulation_seconds > 3 else ""
     typer.echo(f"wrote {output}: {report.frames} frames, simulation {report.simulation_seconds * 1000:.1f} ms, "
                f"render {report.render_seconds:.2f} s{compiled}", err=True)
@@ -144,6 +154,8 @@ def batch(
     from .output import progress_bar
 
     positive(jobs, "--jobs")
+    if scheduler is None:
+        jobs = capped_jobs(jobs, notice)
     if executor not in ("local", "dask"):
         raise InputError(f"--executor: expected local or dask, got {executor!r}")
     suffix = {"mp4": ".mp4", "gif": ".gif", "npz": ".npz", "png": ""}.get(fmt)
@@ -151,10 +163,8 @@ def batch(
         raise InputError(f"--format: expected mp4, gif, npz or png, got {fmt!r}")
     settings = settings_from(size, camera, antialias=antialias)
     specs = collect_specs(inputs)
-    try:
-        outdir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"{outdir}: cannot create the output directory ({exc.strerror})") from None
+    if outdir.exists() and not outdir.is_dir():
+        raise InputError(f"{outdir}: is not a directory")
     with progress_bar(len(specs), "batch") as advance:
         results = run_batch(specs, outdir, suffix, settings, backend, jobs, force, mesh, muscles, identity_seed(identity),
                             on_done=(lambda _: advance()) if advance else None, executor=executor, scheduler=scheduler)
@@ -290,8 +300,7 @@ def sheet(
     positive(columns, "--columns")
     if output.suffix.lower() != ".png":
         raise InputError(f"{output}: the sheet is a .png")
-    if output.exists() and not force:
-        raise InputError(f"{output}: already exists (use --force to overwrite)")
+    check_destination(output, force)
     order = {name: k for k, name in enumerate(THESIS_ORDER)}
     overrides = dict(mesh=mesh, muscles=muscles, identity=identity_seed(identity))
     specs = sorted((load_spec(p).with_overrides(**overrides) for p in collect_specs(inputs)),
@@ -323,8 +332,7 @@ def sheet(
             else:
                 with FaceRenderer.of(a, settings, backend) as own:
                     images.append(own.frame(a, apex_frame(a)))
-    output.parent.mkdir(parents=True, exist_ok=True)
-    contact_sheet(images, labels, output, columns)
+    contact_sheet(images, labels, output, columns, replace=force)
     typer.echo(f"wrote {output}: {len(images)} faces", err=True)
     for failure in failures:
         typer.echo(failure, err=True)
@@ -355,7 +363,7 @@ def dataset(
     width, height = parse_size(size)
     settings = DatasetSettings(seed, width, height, jitter, backend, clip)
     with progress_bar(max(n, 0), "dataset") as advance:
-        manifest = build_dataset(output, n, settings, executor, jobs, scheduler, advance)
+        manifest = build_dataset(output, n, settings, executor, jobs, scheduler, advance, warn=notice)
     typer.echo(f"wrote {manifest} ({n} samples)", err=True)
     if sheet_png:
         dataset_sheet(output, sheet_png)
@@ -408,8 +416,8 @@ def mesh_landmarks(
     from .mesh import load_mesh
     from .writers import atomic_path
 
-    if output and output.exists() and not force:
-        raise InputError(f"{output}: already exists (use --force to overwrite)")
+    if output:
+        check_destination(output, force)
     proposal = propose_landmarks(load_mesh(mesh), load_mesh(HOPPER_MESH))
     table = Table(title=f"landmarks of {mesh} (distance after matching bounding boxes, cm of the Hopper face)")
     for column in ("landmark", "vertex", "distance"):
@@ -418,7 +426,7 @@ def mesh_landmarks(
         table.add_row(name, str(vertex), f"{distance:.2f}")
     Console(width=100).print(table)
     if output:
-        with atomic_path(output) as tmp:
+        with atomic_path(output, replace=force) as tmp:
             tmp.write_text(yaml.safe_dump({name: vertex for name, (vertex, _) in proposal.items()}, sort_keys=False))
         typer.echo(f"wrote {output}", err=True)
 
@@ -438,24 +446,24 @@ def mesh_align(
 
     from .align import align, load_landmarks
     from .config import HOPPER_MESH, HOPPER_MUSCLES
-    from .mesh import load_mesh, write_obj
+    from .mesh import load_mesh, obj_text
     from .muscles import MuscleFile, load_muscles, muscles_as_points
     from .schema import load_model
     from .writers import atomic_path
 
     muscles_out = muscles_out or output.with_suffix("").with_suffix(".muscles.yaml")
     for path in (output, muscles_out):
-        if path.exists() and not force:
-            raise InputError(f"{path}: already exists (use --force to overwrite)")
+        check_destination(path, force)
     face = load_mesh(mesh)
     default = load_mesh(HOPPER_MESH)
     aligned, residual = align(face, load_landmarks(landmarks, face), default)
     carried = muscles_as_points(load_model(HOPPER_MUSCLES, MuscleFile), default)
-    write_obj(output, aligned, header=f"{mesh} aligned to the Hopper face by {landmarks}")
-    with atomic_path(muscles_out) as tmp:
-        tmp.write_text(f"# The Hopper face's muscles carried by position to {output.name}.\n"
-                       + yaml.safe_dump(carried.model_dump(mode="json"), sort_keys=False))
-    resolved = load_muscles(muscles_out, load_mesh(output))  # every muscle snaps, or a one-line error
+    # both files written under temporary names and checked together; renamed only if every muscle snaps
+    with atomic_path(output, replace=force) as obj_tmp, atomic_path(muscles_out, replace=force) as muscles_tmp:
+        obj_tmp.write_text(obj_text(aligned, header=f"{mesh} aligned to the Hopper face by {landmarks}"))
+        muscles_tmp.write_text(f"# The Hopper face's muscles carried by position to {output.name}.\n"
+                               + yaml.safe_dump(carried.model_dump(mode="json"), sort_keys=False))
+        resolved = load_muscles(muscles_tmp, load_mesh(obj_tmp), source=str(muscles_out))
     typer.echo(f"wrote {output} and {muscles_out}: {resolved.count} muscles; landmark residuals "
                f"median {np.median(residual):.2f} cm, largest {residual.max():.2f} cm", err=True)
 
@@ -471,9 +479,8 @@ def mesh_from_photo_command(
     """Build a face mesh (MediaPipe topology, cm) from one photo. Needs facesim[photo]."""
     from .photo import mesh_from_photo
 
-    if output.exists() and not force:
-        raise InputError(f"{output}: already exists (use --force to overwrite)")
-    built = mesh_from_photo(photo, output, symmetric=symmetrise)
+    check_destination(output, force)
+    built = mesh_from_photo(photo, output, symmetric=symmetrise, replace=force)
     typer.echo(f"wrote {output}: {built.vertex_count} vertices, {len(built.faces)} triangles", err=True)
 
 

@@ -36,14 +36,21 @@ import hashlib
 import io
 import json
 import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
+import os
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, as_completed, wait
 from dataclasses import asdict, dataclass
+from itertools import repeat
 from pathlib import Path
 
 import numpy as np
 
 from .errors import InputError, SimulationError
+from .workers import capped_jobs, die_with_parent
 from .writers import atomic_path
+
+#: Samples in flight per worker: enough to keep each busy, few enough that memory stays
+#: flat however many samples a run asks for.
+WINDOW = 4
 
 BASIC = ("happy", "sad", "angry", "fear", "disgust", "surprise")
 FRAMES, ONSET = 20, 10
@@ -168,8 +175,9 @@ def _render_sample(root: Path, sid: str, animation, draw: dict, settings: Datase
     )
 
 
-def _prepare(directory: Path, n: int, settings: DatasetSettings) -> list[int]:
-    """Create the layout, check a rerun matches the first run, list unfinished samples."""
+def _prepare(directory: Path, n: int, settings: DatasetSettings):
+    """Create the layout, check a rerun matches the first run; the unfinished samples'
+    indices, lazily (a run of ten million samples starts at once, in constant memory)."""
     (directory / "images").mkdir(parents=True, exist_ok=True)
     (directory / "labels").mkdir(exist_ok=True)
     if settings.clip:
@@ -185,17 +193,27 @@ def _prepare(directory: Path, n: int, settings: DatasetSettings) -> list[int]:
     else:
         with atomic_path(meta) as tmp:
             tmp.write_text(json.dumps(wanted, sort_keys=True))
-    return [i for i in range(n) if not (directory / "labels" / f"{sample_id(i)}.json").exists()]
+    finished = {entry.name[:-5] for entry in os.scandir(directory / "labels") if entry.name.endswith(".json")}
+    return (i for i in range(n) if sample_id(i) not in finished)
 
 
-def _run_local(directory: Path, todo: list[int], settings: DatasetSettings, jobs: int, advance) -> None:
+def _run_local(directory: Path, todo, settings: DatasetSettings, jobs: int, advance) -> None:
     if jobs <= 1:
         for i in todo:
             make_sample(str(directory), i, settings)
             advance()
         return
-    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-        for _ in pool.map(make_sample, [str(directory)] * len(todo), todo, [settings] * len(todo), chunksize=4):
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"), initializer=die_with_parent) as pool:
+        pending: set = set()
+        for i in todo:  # at most WINDOW samples per worker in flight: memory stays flat in --n
+            pending.add(pool.submit(make_sample, str(directory), i, settings))
+            if len(pending) >= WINDOW * jobs:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    future.result()
+                    advance()
+        for future in as_completed(pending):
+            future.result()
             advance()
 
 
@@ -221,16 +239,21 @@ def dask_client(scheduler: str | None, jobs: int):
 
 
 def run_on_dask(client, function, argument_lists, on_result) -> None:
-    """Map ``function`` over the argument lists on a Dask client, calling ``on_result``
-    as each finishes; then close the client (and its LocalCluster, if it made one)."""
-    from dask.distributed import as_completed
+    """Map ``function`` over the argument lists (iterables) on a Dask client, at most
+    WINDOW calls per worker in flight, calling ``on_result`` as each finishes; then close
+    the client (and its LocalCluster, if it made one)."""
+    from dask.distributed import as_completed as dask_completed
 
     cluster = getattr(client, "_facesim_cluster", None)
     try:
-        futures = client.map(function, *argument_lists, pure=False)
-        for future in as_completed(futures):
+        window = WINDOW * max(1, len(client.scheduler_info().get("workers", {})))
+        running = dask_completed()
+        for arguments in zip(*argument_lists):
+            running.add(client.submit(function, *arguments, pure=False))
+            if running.count() >= window:
+                on_result(next(running).result())
+        for future in running:
             on_result(future.result())
-        del futures
     finally:
         client.close()
         if cluster is not None:
@@ -269,9 +292,21 @@ def read_manifest(path: Path) -> list[dict]:
         return list(csv.DictReader(handle))
 
 
+def check_settings(settings: DatasetSettings) -> None:
+    """Every setting checked before anything is written (dataset.json records them)."""
+    from .render import BACKENDS, RenderSettings
+
+    if settings.seed < 0:
+        raise InputError(f"--seed: expected a non-negative integer, got {settings.seed}")
+    RenderSettings(settings.width, settings.height)  # --size
+    if settings.backend not in ("auto",) + BACKENDS:
+        raise InputError(f"--backend: expected auto, {' or '.join(BACKENDS)}, got {settings.backend!r}")
+
+
 def build_dataset(directory: Path, n: int, settings: DatasetSettings, executor: str = "local", jobs: int = 2,
-                  scheduler: str | None = None, advance=None) -> Path:
-    """Make (or finish) a dataset of ``n`` samples; returns the manifest's path."""
+                  scheduler: str | None = None, advance=None, warn=None) -> Path:
+    """Make (or finish) a dataset of ``n`` samples; returns the manifest's path. ``warn``
+    receives one-line notices (--jobs capped to the cores)."""
     if executor not in ("local", "dask"):
         raise InputError(f"--executor: expected local or dask, got {executor!r}")
     if jobs < 1:
@@ -280,6 +315,9 @@ def build_dataset(directory: Path, n: int, settings: DatasetSettings, executor: 
         raise InputError("--scheduler: only with --executor dask")
     if n <= 0:
         raise InputError(f"--n: the number of samples must be at least 1, got {n}")
+    check_settings(settings)
+    if scheduler is None:  # a cluster elsewhere has its own cores
+        jobs = capped_jobs(jobs, warn)
     client = dask_client(scheduler, jobs) if executor == "dask" else None  # fail before writing anything
     try:
         todo = _prepare(directory, n, settings)
@@ -289,8 +327,8 @@ def build_dataset(directory: Path, n: int, settings: DatasetSettings, executor: 
         raise
     advance = advance or (lambda n=1: None)
     if client is not None:
-        run_on_dask(client, make_sample, ([str(directory)] * len(todo), todo, [settings] * len(todo)), lambda _: advance())
-    elif todo:
+        run_on_dask(client, make_sample, (repeat(str(directory)), todo, repeat(settings)), lambda _: advance())
+    else:
         _run_local(directory, todo, settings, jobs, advance)
     return write_manifest(directory)
 

@@ -272,12 +272,17 @@ def subdivide(mesh: FaceMesh, levels: int = 1) -> FaceMesh:
     return FaceMesh(vertices, faces)
 
 
-def write_obj(path: str | Path, mesh: FaceMesh, header: str = "") -> None:
-    """Write an OBJ with 6 decimals (1e-6 cm), atomically."""
-    from .writers import atomic_path
-
+def obj_text(mesh: FaceMesh, header: str = "") -> str:
+    """A mesh as OBJ text with 6 decimals (1e-6 cm), a commented header first."""
     lines = [f"# {line}" for line in header.splitlines()]
     lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in mesh.vertices]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces]
-    with atomic_path(path) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
+    return "\n".join(lines) + "\n"
+
+
+def write_obj(path: str | Path, mesh: FaceMesh, header: str = "", replace: bool = True) -> None:
+    """Write an OBJ atomically (facesim.writers)."""
+    from .writers import atomic_path
+
+    with atomic_path(path, replace=replace) as tmp:
+        tmp.write_text(obj_text(mesh, header))

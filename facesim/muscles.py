@@ -335,9 +335,10 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
     )
 
 
-def load_muscles(path: str | Path, mesh: FaceMesh) -> MuscleSet:
+def load_muscles(path: str | Path, mesh: FaceMesh, source: str | None = None) -> MuscleSet:
+    """Read a muscle file and resolve it on ``mesh``; errors name ``source`` (the path)."""
     path = Path(path)
-    return resolve_muscles(load_model(path, MuscleFile), mesh, source=str(path))
+    return resolve_muscles(load_model(path, MuscleFile), mesh, source=source or str(path))
 
 
 def muscles_as_points(spec: MuscleFile, mesh: FaceMesh) -> MuscleFile:

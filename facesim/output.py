@@ -21,7 +21,8 @@ import numpy as np
 from .errors import InputError
 from .render import FaceRenderer, RenderSettings, shared_renderer
 from .simulate import Animation, muscle_forces
-from .writers import atomic_path
+from .workers import die_with_parent
+from .writers import WriteError, atomic_path, check_destination
 
 KINDS = {".mp4": "mp4", ".gif": "gif", ".npz": "npz"}
 #: Arrow length per unit of muscle force in --show-muscles (cm per force unit).
@@ -33,34 +34,45 @@ def output_kind(path: Path) -> str:
 
 
 def check_output(path: Path, force: bool, settings: RenderSettings | None = None) -> str:
-    """Validate an output path before any work: kind, existence, writable parent."""
+    """Validate an output path before any work: its kind, and that it may be written
+    (facesim.writers.check_destination: --force replaces only facesim's own outputs)."""
     kind = output_kind(path)
     if kind == "unknown":
         raise InputError(f"{path}: unknown output type {path.suffix!r} (use .mp4, .gif, .npz or a directory)")
-    if path.exists() and not force:
-        raise InputError(f"{path}: already exists (use --force to overwrite)")
-    parent = path.parent
-    if not parent.exists():
-        try:
-            parent.mkdir(parents=True)
-        except OSError as exc:
-            raise InputError(f"{path}: cannot create the output directory ({exc.strerror})") from None
-    if not parent.is_dir() or not _writable(parent):
-        raise InputError(f"{path}: output directory is not writable")
     if kind == "mp4" and settings is not None and (settings.width % 2 or settings.height % 2):
         raise InputError(f"--size: MP4 needs an even width and height, got {settings.width}x{settings.height}")
+    check_destination(path, force, directory=kind == "png")
     return kind
 
 
-def _writable(directory: Path) -> bool:
-    """Try it: permission bits do not tell for root or read-only file systems."""
-    import tempfile
+def _verify_frames(kind: str, count: int):
+    """A check that a written output reads back with all ``count`` frames."""
 
-    try:
-        with tempfile.TemporaryFile(dir=directory):
-            return True
-    except OSError:
-        return False
+    def verify(tmp: Path) -> None:
+        try:
+            if kind == "mp4":
+                import imageio_ffmpeg
+
+                found = imageio_ffmpeg.count_frames_and_secs(str(tmp))[0]
+            elif kind == "gif":
+                from PIL import Image
+
+                with Image.open(tmp) as image:
+                    found = image.n_frames
+            else:
+                from PIL import Image
+
+                found = 0
+                for png in sorted(tmp.iterdir()):
+                    with Image.open(png) as image:
+                        image.verify()
+                    found += 1
+        except Exception as exc:  # a truncated file fails in many ways
+            raise WriteError(f"the written {kind.upper()} does not read back ({type(exc).__name__}): disk full?") from None
+        if found != count:
+            raise WriteError(f"the written {kind.upper()} holds {found} of {count} frames: disk full?")
+
+    return verify
 
 
 def arrows_for(animation: Animation) -> np.ndarray | None:
@@ -106,7 +118,7 @@ def render_frames(animation: Animation, settings: RenderSettings, backend: str =
     chunks = [(animation.positions[a:b], None if arrows is None else arrows[a:b], None if pose is None else pose[a:b],
                animation.jaw[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
     fixed = [(animation.rest, animation.faces, settings, backend, animation.figure)] * len(chunks)
-    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"), initializer=die_with_parent) as pool:
         out = []
         for (positions, *_), images in zip(chunks, pool.map(_render_chunk, *zip(*fixed), *zip(*chunks))):
             out.append(images)
@@ -115,16 +127,18 @@ def render_frames(animation: Animation, settings: RenderSettings, backend: str =
     return np.concatenate(out)
 
 
-def write_frames(frames: np.ndarray, path: Path, kind: str, fps: float) -> None:
-    """Write rendered frames atomically as MP4, GIF or a PNG directory."""
+def write_frames(frames: np.ndarray, path: Path, kind: str, fps: float, replace: bool = True) -> None:
+    """Write rendered frames atomically as MP4, GIF or a PNG directory, verified by
+    reading them back (``replace``: whether an existing output may be replaced)."""
     import imageio.v3 as iio
 
+    verify = _verify_frames(kind, len(frames))
     if kind == "png":
-        with atomic_path(path, directory=True) as tmp:
+        with atomic_path(path, directory=True, replace=replace, verify=verify) as tmp:
             for k, frame in enumerate(frames):
                 iio.imwrite(tmp / f"frame_{k:04d}.png", frame)
         return
-    with atomic_path(path) as tmp:
+    with atomic_path(path, replace=replace, verify=verify) as tmp:
         if kind == "mp4":
             import imageio_ffmpeg
 
@@ -141,8 +155,21 @@ def write_frames(frames: np.ndarray, path: Path, kind: str, fps: float) -> None:
             iio.imwrite(tmp, frames, extension=".gif", duration=1000.0 / fps, loop=0)
 
 
-def write_npz(animation: Animation, path: Path) -> None:
-    with atomic_path(path) as tmp:
+def _verify_npz(frames: int):
+    def verify(tmp: Path) -> None:
+        try:
+            with np.load(tmp) as data:
+                complete = data["positions"].shape[0] == frames
+        except Exception as exc:  # a truncated archive fails in many ways
+            raise WriteError(f"the written NPZ does not read back ({type(exc).__name__}): disk full?") from None
+        if not complete:
+            raise WriteError("the written NPZ is incomplete: disk full?")
+
+    return verify
+
+
+def write_npz(animation: Animation, path: Path, replace: bool = True) -> None:
+    with atomic_path(path, replace=replace, verify=_verify_npz(animation.frames)) as tmp:
         np.savez_compressed(
             tmp, positions=animation.positions, faces=animation.faces, rest=animation.rest,
             activations=animation.activations, muscles=np.array(animation.muscle_names), dt=animation.dt,
@@ -169,15 +196,16 @@ class RenderReport:
 
 def write_animation(animation: Animation, path: Path, settings: RenderSettings, fps: float | None = None,
                     backend: str = "auto", jobs: int = 1, progress=None,
-                    renderer: FaceRenderer | None = None) -> RenderReport:
-    """Render (unless NPZ) and write one animation; the output path was checked before."""
+                    renderer: FaceRenderer | None = None, replace: bool = False) -> RenderReport:
+    """Render (unless NPZ) and write one animation; the output path was checked before
+    (``replace``: it was allowed to exist, with --force)."""
     kind = output_kind(path)
     start = time.perf_counter()
     if kind == "npz":
-        write_npz(animation, path)
+        write_npz(animation, path, replace)
     else:
         frames = render_frames(animation, settings, backend, jobs, progress, renderer)
-        write_frames(frames, path, kind, fps or animation.fps)
+        write_frames(frames, path, kind, fps or animation.fps, replace)
     return RenderReport(animation.name, path, len(animation.active_muscles), animation.frames, animation.seconds,
                         time.perf_counter() - start)
 

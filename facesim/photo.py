@@ -181,7 +181,7 @@ def read_image(path: str | Path) -> np.ndarray:
     return np.asarray(image[:, :, :3], dtype=np.uint8)
 
 
-def mesh_from_photo(photo: str | Path, output: str | Path, symmetric: bool = True) -> FaceMesh:
+def mesh_from_photo(photo: str | Path, output: str | Path, symmetric: bool = True, replace: bool = True) -> FaceMesh:
     """Build a mesh from a photo file and write it as OBJ."""
     from .mesh import write_obj
 
@@ -195,5 +195,5 @@ def mesh_from_photo(photo: str | Path, output: str | Path, symmetric: bool = Tru
         f"468 MediaPipe Face Mesh landmarks, 852 triangles; cm, +x subject's left, +y up, +z forward\n"
         f"symmetrised: {symmetric}"
     )
-    write_obj(output, mesh, header=header)
+    write_obj(output, mesh, header=header, replace=replace)
     return mesh

@@ -98,7 +98,7 @@ def plot_muscles(model, path: Path, backend: str = "auto") -> None:
     plt.close(fig)
 
 
-def contact_sheet(images: list[np.ndarray], labels: list[str], path: Path, columns: int = 3) -> None:
+def contact_sheet(images: list[np.ndarray], labels: list[str], path: Path, columns: int = 3, replace: bool = True) -> None:
     """Images in a labelled grid."""
     import matplotlib
 
@@ -114,6 +114,6 @@ def contact_sheet(images: list[np.ndarray], labels: list[str], path: Path, colum
         ax.imshow(image)
         ax.set_title(textwrap.fill(label, 22), fontsize=12 if len(label) <= 15 else 9)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
+    with atomic_path(path, replace=replace) as tmp:
         fig.savefig(tmp, dpi=120)
     plt.close(fig)

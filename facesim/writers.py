@@ -1,35 +1,199 @@
-"""Output writers: PNG sequences, MP4, GIF and raw NPZ, each written under a temporary
-name and renamed into place only when complete, so that a failure or Ctrl-C never leaves a
-half-written output behind.
+"""Writing files without losing any: one rule for every output facesim makes.
+
+1. Before any work, :func:`check_destination` decides whether ``path`` may be written: it
+   must not exist, or, with ``--force``, be something facesim itself writes (a file of the
+   kind asked for, or a directory holding only frame PNGs), never the working directory or
+   one of its parents.
+2. :func:`atomic_path` yields a temporary name in the destination directory, creating the
+   missing parent directories it needs (and removing them again if the write fails).
+3. The caller writes there; an optional ``verify`` reads it back (an MP4 that ffmpeg can
+   decode, a complete NPZ) before anything is replaced.
+4. The temporary is renamed into place: a file with ``link`` so that an output written
+   meanwhile by another run is never clobbered without ``--force``; a replaced directory is
+   first moved aside, so the old output exists until the new one does.
+
+Any failure, Ctrl-C, SIGTERM or SIGHUP (which :func:`handle_termination` turns into an
+exception) removes the temporary; a write the disk refuses is one line, not a traceback.
 """
 
 from __future__ import annotations
 
+import errno
 import os
+import re
 import shutil
+import signal
 from contextlib import contextmanager
 from pathlib import Path
 
+from .errors import FacesimError, InputError
+
+#: The files facesim writes, by suffix, with the bytes each kind starts with (at offset).
+MAGIC = {".mp4": (4, b"ftyp"), ".gif": (0, b"GIF8"), ".npz": (0, b"PK"), ".png": (0, b"\x89PNG"),
+         ".obj": None, ".yaml": None, ".json": None, ".csv": None, ".parquet": (0, b"PAR1")}
+FRAME = re.compile(r"frame_\d{4,}\.png")
+
+
+class WriteError(FacesimError):
+    """The destination refused the write (full disk, permissions, ...): exit code 1."""
+
+    exit_code = 1
+
+
+class Terminated(BaseException):
+    """SIGTERM or SIGHUP arrived: unwind like Ctrl-C so every temporary is removed."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def handle_termination() -> None:
+    """Make SIGTERM and SIGHUP raise :class:`Terminated` in the main thread."""
+
+    def raise_terminated(signum, _frame):
+        raise Terminated(signum)
+
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, raise_terminated)
+
+
+def _is_facesim_output(path: Path, directory: bool) -> bool:
+    """Whether an existing ``path`` is something facesim writes and ``--force`` may replace."""
+    if path.is_symlink():
+        return False
+    if directory:
+        return path.is_dir() and all(FRAME.fullmatch(p.name) and p.is_file() for p in path.iterdir())
+    if not path.is_file():
+        return False
+    magic = MAGIC.get(path.suffix.lower(), (0, b""))
+    if magic is None:  # a text kind: the suffix says it
+        return True
+    offset, start = magic
+    with path.open("rb") as handle:
+        head = handle.read(offset + len(start))
+    return head[offset:] == start
+
+
+def check_destination(path: Path, force: bool, directory: bool = False) -> None:
+    """Raise InputError unless ``path`` may be written (step 1 of the module's rule)."""
+    resolved = path.resolve()
+    cwd = Path.cwd().resolve()
+    if resolved == cwd or resolved in cwd.parents:
+        raise InputError(f"{path}: is the working directory or one of its parents; name a new output")
+    if not (path.exists() or path.is_symlink()):
+        _check_parent(path)
+        return
+    if not force:
+        raise InputError(f"{path}: already exists (use --force to overwrite)")
+    if not _is_facesim_output(path, directory):
+        what = "a directory of frame_NNNN.png files" if directory else f"a {path.suffix or 'file'} file facesim wrote"
+        raise InputError(f"{path}: exists and is not {what}; --force replaces only facesim's own outputs, "
+                         "so move or remove it yourself")
+    _check_parent(path)
+
+
+def _check_parent(path: Path) -> None:
+    """The nearest existing ancestor must be a writable directory."""
+    parent = path.absolute().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir() or not _writable(parent):
+        raise InputError(f"{path}: output directory is not writable")
+
+
+def _writable(directory: Path) -> bool:
+    """Try it: permission bits do not tell for root or read-only file systems."""
+    import tempfile
+
+    try:
+        with tempfile.TemporaryFile(dir=directory):
+            return True
+    except OSError:
+        return False
+
 
 @contextmanager
-def atomic_path(path: str | Path, directory: bool = False):
-    """Yield a temporary sibling of ``path``; rename it to ``path`` if the block succeeds.
+def atomic_path(path: str | Path, directory: bool = False, replace: bool = True, verify=None):
+    """Yield a temporary sibling of ``path`` (a directory if ``directory``); when the block
+    succeeds, run ``verify(tmp)`` and rename the temporary to ``path``.
 
-    The temporary name keeps the suffix so that writers choosing a format by extension
-    still work.
+    ``replace`` allows replacing an existing output (``--force``, or files facesim owns
+    such as a dataset's manifest); without it a ``path`` that appeared meanwhile is an
+    error. The temporary name keeps the suffix, so writers that choose a format by
+    extension still work.
     """
     path = Path(path)
+    created = _make_parents(path)
     tmp = path.with_name(f".{path.stem}.partial-{os.getpid()}{path.suffix}")
-    if directory:
-        tmp.mkdir(parents=False)
     try:
+        if directory:
+            tmp.mkdir()
         yield tmp
-        if path.is_dir() and not path.is_symlink():
-            shutil.rmtree(path)
-        os.replace(tmp, path)
-    except BaseException:
-        if tmp.is_dir():
+        if verify is not None:
+            try:
+                verify(tmp)
+            except WriteError as exc:
+                raise WriteError(f"{path}: {exc}; nothing was written") from None
+        _move_into_place(tmp, path, directory, replace)
+    except BaseException as exc:
+        if tmp.is_dir() and not tmp.is_symlink():
             shutil.rmtree(tmp, ignore_errors=True)
         else:
             tmp.unlink(missing_ok=True)
+        for made in created:  # innermost first, and only if still empty
+            try:
+                made.rmdir()
+            except OSError:
+                break
+        if isinstance(exc, OSError):
+            reason = exc.strerror or (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            raise WriteError(f"{path}: cannot write ({reason}); nothing was written") from None
         raise
+
+
+def _make_parents(path: Path) -> list[Path]:
+    """Create the missing parents of ``path``; return them, innermost first."""
+    missing = []
+    parent = path.absolute().parent
+    while not parent.exists():
+        missing.append(parent)
+        parent = parent.parent
+    made = []
+    try:
+        for directory in reversed(missing):
+            try:
+                directory.mkdir()
+                made.append(directory)
+            except FileExistsError:  # another worker of the same run made it
+                pass
+    except OSError as exc:
+        raise WriteError(f"{path}: cannot create the output directory ({exc.strerror})") from None
+    return made[::-1]
+
+
+def _move_into_place(tmp: Path, path: Path, directory: bool, replace: bool) -> None:
+    exists = path.exists() or path.is_symlink()
+    if exists and not replace:
+        raise InputError(f"{path}: appeared while facesim was writing it (another run?); use --force to overwrite")
+    if directory:
+        if exists:
+            aside = path.with_name(f".{path.name}.replaced-{os.getpid()}")
+            os.replace(path, aside)
+            os.replace(tmp, path)
+            shutil.rmtree(aside, ignore_errors=True)
+        else:
+            os.rename(tmp, path)
+        return
+    if replace:
+        os.replace(tmp, path)
+        return
+    try:
+        os.link(tmp, path)  # fails if path exists: never clobbers what another run wrote
+    except FileExistsError:
+        raise InputError(f"{path}: appeared while facesim was writing it (another run?); use --force to overwrite") from None
+    except OSError as exc:
+        if exc.errno not in (errno.EPERM, errno.ENOTSUP, errno.EXDEV):
+            raise
+        os.replace(tmp, path)  # a file system without hard links
+    tmp.unlink(missing_ok=True)
