@@ -120,7 +120,7 @@ def render(
     loaded = loaded.with_overrides(mesh=mesh, muscles=muscles, identity=identity_seed(identity))
     output = output or Path("out") / f"{loaded.title}.mp4"
     check_output(output, force, settings)
-    animation = simulate(loaded)
+    animation = simulate(loaded, notice=notice)
     with progress_bar(animation.frames, f"rendering {loaded.title}") as advance:
         report = write_animation(animation, output, settings, fps, backend, jobs, advance, replace=force)
     compiled = " (the first run compiles the Numba kernels; later runs load them from cache)" if report.simulation_seconds > 3 else ""

@@ -7,8 +7,11 @@ against lives here, so that a reader can see them in one place and change them o
 from pathlib import Path
 
 #: Options for every ``@njit`` kernel. ``cache=True`` keeps compiled code on disk so that
-#: a second process does not compile again.
-NUMBA_OPTIONS = dict(cache=True, nogil=True, fastmath=True)
+#: a second process does not compile again. ``error_model="numpy"``: a division by zero
+#: gives inf or NaN, which the simulation reports with its frame (``kernels._not_finite``
+#: reads the bits, which ``fastmath`` cannot fold away), instead of raising
+#: ZeroDivisionError out of a kernel.
+NUMBA_OPTIONS = dict(cache=True, nogil=True, fastmath=True, error_model="numpy")
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 PROJECT_DIR = PACKAGE_DIR.parent

@@ -36,6 +36,20 @@ from .config import LENGTH_EPS, NEGLIGIBLE_DELTA, NUMBA_OPTIONS
 OK, NOT_FINITE, INVERTED, RUNAWAY = 0, 1, 2, 3
 #: Muscle kinds (facesim.muscles.LINEAR, SPHINCTER).
 LINEAR, SPHINCTER = 0, 1
+#: The exponent bits of a float64: all set for inf and NaN.
+EXPONENT = np.int64(0x7FF0000000000000)
+
+
+@njit(**NUMBA_OPTIONS)
+def _not_finite(a):
+    """The first row of ``a`` (rows, 3), C-contiguous float64, holding an inf or a NaN, or
+    -1. Reads the exponent bits: ``fastmath`` lets the compiler assume every float is
+    finite and drop ``math.isfinite``, but not an integer test."""
+    bits = a.reshape(-1).view(np.int64)
+    for k in range(bits.shape[0]):
+        if bits[k] & EXPONENT == EXPONENT:
+            return k // a.shape[1]
+    return -1
 
 
 @njit(**NUMBA_OPTIONS)
@@ -513,12 +527,13 @@ def _simulate(
     muscle_r_max, muscle_force, axis_x, axis_z, radius, rest_position,
     jaw_column, jaw_weight, jaw_hinge, jaw_axis, jaw_max, lid_column, lid_centre, lid_delta, drive_column,
     drive_weight, contact_upper, contact_lower, contact_gap, mass, damping, k0, gamma, zeta, length_unit, tissue, drive,
-    edge_repulsion, uv_projection, activations, dt, substeps, energy_limit, stop_on_inversion,
+    edge_repulsion, uv_projection, activations, start, stop, dt, substeps, energy_limit, stop_on_inversion,
     x, v, positions, kinetic_energy, inverted, smallest_area,
 ):
-    """Algorithm 3.4.1: ``substeps`` steps of Δt / substeps per frame, for every row of
-    ``activations`` (frames, muscles and controls). x and v (n, 3) are the state, advanced
-    in place. Within a frame the controls (jaw, eyelids) move linearly from the previous
+    """Algorithm 3.4.1: ``substeps`` steps of Δt / substeps per frame, for frames
+    ``start`` to ``stop`` of ``activations`` (frames, muscles and controls): the caller
+    runs a long animation in pieces, so that Ctrl-C and SIGTERM act between them. x and v
+    (n, 3) are the state, advanced in place. Within a frame the controls (jaw, eyelids) move linearly from the previous
     frame's values, so the targets never jump.
 
     Writes positions (frames, n, 3) and per-frame diagnostics. Returns (status, frame,
@@ -549,7 +564,7 @@ def _simulate(
     region = np.empty(n, dtype=np.int64)
     delta = np.empty(n)
     stamp = 0
-    for f in range(activations.shape[0]):
+    for f in range(start, stop):
         for s in range(substeps):
             moving = False
             if rigged:
@@ -593,11 +608,14 @@ def _simulate(
                     v[i, d] = v_new[i, d]
                     x[i, d] += h * v[i, d]  # eq. 3.16
             _contacts(x, v, contact_upper, contact_lower, contact_gap, pinned)
+        bad = _not_finite(x)
+        if bad < 0:
+            bad = _not_finite(v)
+        if bad >= 0:
+            return NOT_FINITE, f, bad
         energy = 0.0
         for i in range(n):
             for d in range(3):
-                if not math.isfinite(x[i, d]) or not math.isfinite(v[i, d]):
-                    return NOT_FINITE, f, i
                 energy += 0.5 * mass * v[i, d] * v[i, d]
                 positions[f, i, d] = x[i, d]
         count, first, smallest = _triangle_checks(x, faces, rest_normal, rest_area, rest_against, normals)

@@ -13,6 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .config import LENGTH_EPS
+
+#: A triangle with less area than this fraction of the mesh's squared size has none.
+DEGENERATE_AREA = 1e-10
+
 from .errors import InputError
 
 
@@ -185,8 +190,25 @@ def mirror_mismatched_faces(faces: np.ndarray, mapping: np.ndarray) -> np.ndarra
 
 
 def diagnose(mesh: FaceMesh) -> list[str]:
-    """What stops a mesh from being a facesim face: each problem as one sentence."""
+    """What stops a mesh from being a facesim face: each problem as one sentence. Run on
+    every mesh before it is simulated, and by `facesim mesh info`."""
     problems = []
+    v, f = mesh.vertices, mesh.faces
+    if not np.isfinite(v).all():
+        return [f"{int((~np.isfinite(v).all(axis=1)).sum())} vertices have non-finite coordinates (NaN or inf)"]
+    repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
+    if repeated.any():
+        problems.append(f"{int(repeated.sum())} triangles repeat a corner (the first, triangle {np.flatnonzero(repeated)[0]})")
+    scale = max(float(np.ptp(v, axis=0).max()), LENGTH_EPS)
+    flat = (mesh.face_areas < DEGENERATE_AREA * scale**2) & ~repeated
+    if flat.any():
+        problems.append(f"{int(flat.sum())} triangles have no area (the first, triangle {np.flatnonzero(flat)[0]}): "
+                        "a vertex lies on another or on its opposite edge")
+    unused = np.setdiff1d(np.arange(len(v)), f)
+    if len(unused):
+        problems.append(f"{len(unused)} vertices belong to no triangle (the first, vertex {unused[0]})")
+    if problems:  # the checks below assume a proper triangle mesh
+        return problems
     counts = mesh.edge_face_count
     if (counts > 2).any():
         problems.append(f"{int((counts > 2).sum())} non-manifold edges (shared by more than two triangles)")
@@ -259,6 +281,9 @@ def load_mesh(path: str | Path, identity=None) -> FaceMesh:
         raise InputError(f"{path}: no triangles in the mesh")
     if faces.max() >= len(vertices) or faces.min() < 0:
         raise InputError(f"{path}: a triangle refers to a vertex that does not exist")
+    bad = np.flatnonzero(~np.isfinite(vertices).all(axis=1))
+    if len(bad):
+        raise InputError(f"{path}: {len(bad)} vertices have non-finite coordinates (NaN or inf), the first vertex {bad[0]}")
     return FaceMesh(vertices, faces)
 
 

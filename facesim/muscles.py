@@ -30,14 +30,15 @@ from pathlib import Path
 from typing import Annotated, Literal, Union
 
 import numpy as np
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, StrictInt, field_validator, model_validator
 
 from .config import MIDLINE_FRACTION, SNAP_FRACTION
 from .errors import InputError
 from .mesh import FaceMesh
 from .schema import Strict, load_model
 
-Point = int | tuple[float, float, float]
+#: A landmark: a vertex index (an integer: YAML's ``true`` is not vertex 1) or a 3D point.
+Point = Annotated[StrictInt, Field(ge=0)] | tuple[float, float, float]
 NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 
 

@@ -18,9 +18,10 @@ Model = TypeVar("Model", bound=BaseModel)
 
 
 class Strict(BaseModel):
-    """Base of every file schema: unknown fields are errors, models are frozen."""
+    """Base of every file schema: unknown fields are errors, models are frozen, and
+    ``.inf`` or ``.nan`` is no number (YAML reads both as floats)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 def describe(exc: ValidationError) -> str:

@@ -17,11 +17,19 @@ from pathlib import Path
 import numpy as np
 
 from . import kernels
-from .errors import SimulationError
-from .mesh import FaceMesh, load_mesh
+from .errors import InputError, SimulationError
+from .mesh import FaceMesh, diagnose, load_mesh
 from .model import Material, Model, build_model, project_uv
 from .muscles import MuscleSet, load_muscles
 from .spec import Spec, activation_table, pose_table
+
+#: Vertex-steps per call of the simulation kernel (about 0.2 s): a long run returns to
+#: Python between calls, where Ctrl-C and SIGTERM are handled.
+STEPS_PER_CALL = 1_000_000
+#: A run expected to take longer than this (s) is announced before it starts.
+LONG_RUN = 120.0
+#: Vertex-steps per second assumed for that estimate (BENCHMARKS.md: 2-4 million).
+STEP_RATE = 2e6
 
 #: A run is "runaway" when its kinetic energy exceeds that of every vertex crossing a
 #: tenth of the face in one frame: far beyond any expression, short of overflow.
@@ -86,6 +94,10 @@ class Animation:
 @lru_cache(maxsize=8)
 def _mesh_and_muscles(mesh_path: Path, muscles_path: Path, identity=None) -> tuple[FaceMesh, MuscleSet]:
     mesh = load_mesh(mesh_path, identity)
+    problems = diagnose(mesh)  # the checks of `facesim mesh info`, before any simulation
+    if problems:
+        more = f" (and {len(problems) - 1} more: facesim mesh info {mesh_path})" if len(problems) > 1 else ""
+        raise InputError(f"{mesh_path}: not usable as a face: {problems[0]}{more}")
     return mesh, load_muscles(muscles_path, mesh)
 
 
@@ -145,11 +157,17 @@ def run(
     smallest = np.zeros(frames)
     frame_speed = RUNAWAY_FRACTION * model.scale / dt
     energy_limit = 0.5 * model.material.mass * n * frame_speed**2
-    status, frame, element = kernels._simulate(
-        *model.kernel_arrays(), np.ascontiguousarray(activations, dtype=np.float64), float(dt),
-        int(model.material.substeps), energy_limit, stop_on_inversion,
-        x, v, positions, energy, inverted, smallest,
-    )
+    table = np.ascontiguousarray(activations, dtype=np.float64)
+    arrays = model.kernel_arrays()
+    piece = max(1, int(STEPS_PER_CALL / (model.material.substeps * n)))
+    status, frame, element = kernels.OK, -1, -1
+    for start in range(0, frames, piece):  # Python between pieces: Ctrl-C and SIGTERM act within about 0.2 s
+        status, frame, element = kernels._simulate(
+            *arrays, table, start, min(frames, start + piece), float(dt), int(model.material.substeps), energy_limit,
+            stop_on_inversion, x, v, positions, energy, inverted, smallest,
+        )
+        if status != kernels.OK:
+            break
     if status == kernels.NOT_FINITE:
         raise SimulationError(f"{source}: simulation diverged at frame {frame}: vertex {element} is not finite", frame)
     if status == kernels.INVERTED:
@@ -159,10 +177,15 @@ def run(
     return positions, energy, inverted, smallest
 
 
-def simulate(spec: Spec, stop_on_inversion: bool = True) -> Animation:
-    """Simulate an expression spec from the neutral face."""
+def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None) -> Animation:
+    """Simulate an expression spec from the neutral face. ``notice`` receives a one-line
+    estimate before a run expected to take minutes."""
     model = model_for(spec)
     table = activation_table(spec, model.muscles)
+    expected = len(table) * model.material.substeps * model.vertex_count / STEP_RATE
+    if notice and expected > LONG_RUN:
+        notice(f"{spec.source}: {len(table)} frames x {model.material.substeps} sub-steps x {model.vertex_count:,} "
+               f"vertices: about {expected / 60:.0f} minutes of simulation (Ctrl-C stops it)")
     start = time.perf_counter()
     positions, energy, inverted, smallest = run(model, table, spec.dt, stop_on_inversion, spec.source)
     seconds = time.perf_counter() - start

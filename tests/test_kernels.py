@@ -195,7 +195,7 @@ def test_step_matches_reference(switches, rng):
     diag = np.zeros(1), np.zeros(1, dtype=np.int64), np.zeros(1)
     m = model.material.model_copy(update={"substeps": 1})
     arrays = model.kernel_arrays()
-    K._simulate(*arrays, activation[None, :], 0.0025, 1, np.inf, False, x_k, v_k, out, *diag)
+    K._simulate(*arrays, activation[None, :], 0, 1, 0.0025, 1, np.inf, False, x_k, v_k, out, *diag)
     assert m.substeps == 1
     assert_close(v_k, ref_v)
     assert_close(x_k, ref_x)
