@@ -21,7 +21,10 @@ downloaded at run time, its wheel carries the models.
 from __future__ import annotations
 
 import ast
+import contextlib
 import inspect
+import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -62,17 +65,33 @@ def tessellation() -> np.ndarray:
 
 def detect_landmarks(image: np.ndarray, source: str) -> np.ndarray:
     """(468, 3) landmarks in pixels: x right, y down, z away from the camera (image-width units)."""
-    import mediapipe as mp
-
     height, width = image.shape[:2]
-    with mp.solutions.face_mesh.FaceMesh(
-        static_image_mode=True, max_num_faces=1, refine_landmarks=False, min_detection_confidence=0.5
-    ) as face_mesh:
-        result = face_mesh.process(np.ascontiguousarray(image[:, :, :3]))
+    with quiet_stderr():
+        import mediapipe as mp
+
+        with mp.solutions.face_mesh.FaceMesh(
+            static_image_mode=True, max_num_faces=1, refine_landmarks=False, min_detection_confidence=0.5
+        ) as face_mesh:
+            result = face_mesh.process(np.ascontiguousarray(image[:, :, :3]))
     if not result.multi_face_landmarks:
         raise InputError(f"{source}: no face found in the image")
     landmarks = result.multi_face_landmarks[0].landmark
     return np.array([(p.x * width, p.y * height, p.z * width) for p in landmarks], dtype=np.float64)
+
+
+@contextlib.contextmanager
+def quiet_stderr():
+    """Silence what C++ writes to file descriptor 2 meanwhile: MediaPipe's TensorFlow Lite
+    and absl print 4-5 lines per run before any logging setting of theirs is read."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def image_to_face_frame(landmarks: np.ndarray) -> np.ndarray:
@@ -166,19 +185,39 @@ def build_face_mesh(image: np.ndarray, source: str = "image", symmetric: bool = 
     return FaceMesh(points, faces)
 
 
+def as_rgb(image) -> np.ndarray:
+    """(h, w, 3) uint8 of a Pillow image of any mode: 16- and 32-bit grey scaled to 8
+    bits (Pillow's own conversion clips them), palettes, CMYK and alpha (dropped) through
+    Pillow's conversions."""
+    if image.mode in ("I", "I;16", "I;16B", "I;16L", "I;16N", "F"):
+        grey = np.asarray(image, dtype=np.float64)
+        if image.mode == "F":  # floats: their own range
+            top = max(float(grey.max()), 1e-12)
+        elif image.mode.startswith("I;16") or grey.max() > 255:  # Pillow reads 16-bit grey PNGs as I;16 or I
+            top = 65535.0
+        else:
+            top = 255.0
+        grey = np.clip(grey * (255.0 / top), 0, 255).astype(np.uint8)
+        return np.repeat(grey[:, :, None], 3, axis=2)
+    return np.asarray(image.convert("RGB"), dtype=np.uint8)
+
+
 def read_image(path: str | Path) -> np.ndarray:
-    import imageio.v3 as iio
+    """A photo as (h, w, 3) uint8 RGB, whatever its mode, upright as its camera meant
+    (EXIF orientation), the first frame of an animation."""
+    from PIL import Image, ImageOps
 
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: photo not found")
     try:
-        image = iio.imread(path)
-    except Exception as exc:
-        raise InputError(f"{path}: not a readable image ({exc})") from None
-    if image.ndim == 2:
-        image = np.stack([image] * 3, axis=-1)
-    return np.asarray(image[:, :, :3], dtype=np.uint8)
+        with Image.open(path) as image:
+            image.seek(0)
+            image.load()
+            return as_rgb(ImageOps.exif_transpose(image))
+    except Exception as exc:  # Pillow raises many kinds: unidentified, truncated, bombs
+        reason = "not an image Pillow reads" if type(exc).__name__ == "UnidentifiedImageError" else str(exc)
+        raise InputError(f"{path}: not a readable image ({reason})") from None
 
 
 def mesh_from_photo(photo: str | Path, output: str | Path, symmetric: bool = True, replace: bool = True) -> FaceMesh:
