@@ -212,13 +212,13 @@ def validate(specs: list[Path] = typer.Argument(..., help="spec files")):
 def info(mesh: Optional[Path] = MESH, muscles: Optional[Path] = MUSCLES):
     """The face mesh, its muscles, and which OpenGL backends work here."""
     from .config import DEFAULT_MESH, default_muscles
-    from .mesh import load_mesh
+    from .mesh import load_face
     from .muscles import SPHINCTER, load_muscles
     from .render import BACKENDS
 
     mesh_path = mesh or DEFAULT_MESH
     muscles = muscles or default_muscles(mesh_path)
-    face = load_mesh(mesh_path)
+    face = load_face(mesh_path)
     muscle_set = load_muscles(muscles, face)
     cx, cz, radius = face.vertical_axis
     typer.echo(f"mesh: {mesh_path}: {face.vertex_count} vertices, {len(face.faces)} triangles, "
@@ -249,12 +249,12 @@ def muscles_command(
 
     from .config import DEFAULT_MESH, default_muscles
     from .model import Material, build_model
-    from .mesh import load_mesh
+    from .mesh import load_face
     from .muscles import SPHINCTER, load_muscles
     from .plots import muscle_regions, plot_muscles
 
     mesh = mesh or DEFAULT_MESH
-    face = load_mesh(mesh)
+    face = load_face(mesh)
     model = build_model(face, load_muscles(muscles or default_muscles(mesh), face), Material())
     regions = muscle_regions(model)
     m = model.muscles
@@ -446,7 +446,7 @@ def mesh_align(
 
     from .align import align, load_landmarks
     from .config import HOPPER_MESH, HOPPER_MUSCLES
-    from .mesh import load_mesh, obj_text
+    from .mesh import check_face, load_mesh, obj_text
     from .muscles import MuscleFile, load_muscles, muscles_as_points
     from .schema import load_model
     from .writers import atomic_path
@@ -463,7 +463,7 @@ def mesh_align(
         obj_tmp.write_text(obj_text(aligned, header=f"{mesh} aligned to the Hopper face by {landmarks}"))
         muscles_tmp.write_text(f"# The Hopper face's muscles carried by position to {output.name}.\n"
                                + yaml.safe_dump(carried.model_dump(mode="json"), sort_keys=False))
-        resolved = load_muscles(muscles_tmp, load_mesh(obj_tmp), source=str(muscles_out))
+        resolved = load_muscles(muscles_tmp, check_face(load_mesh(obj_tmp), output), source=str(muscles_out))
     typer.echo(f"wrote {output} and {muscles_out}: {resolved.count} muscles; landmark residuals "
                f"median {np.median(residual):.2f} cm, largest {residual.max():.2f} cm", err=True)
 

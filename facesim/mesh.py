@@ -230,6 +230,21 @@ def diagnose(mesh: FaceMesh) -> list[str]:
     return problems
 
 
+def check_face(mesh: FaceMesh, source) -> FaceMesh:
+    """The mesh, if `diagnose` finds nothing wrong with it; else an InputError naming
+    ``source`` and the first problem."""
+    problems = diagnose(mesh)
+    if problems:
+        more = f" (and {len(problems) - 1} more: facesim mesh info {source})" if len(problems) > 1 else ""
+        raise InputError(f"{source}: not usable as a face: {problems[0]}{more}")
+    return mesh
+
+
+def load_face(path: str | Path, identity=None) -> FaceMesh:
+    """A mesh to simulate: read, then checked as `facesim mesh info` checks it."""
+    return check_face(load_mesh(path, identity), path)
+
+
 def fit_vertical_axis(points: np.ndarray) -> tuple[float, float, float]:
     """Least-squares circle through the (x, z) of the points (Kåsa's fit): the head's
     vertical axis (cx, cz) and the radius R of the cylinder the face wraps around."""
@@ -274,6 +289,8 @@ def load_mesh(path: str | Path, identity=None) -> FaceMesh:
             import trimesh
 
             loaded = trimesh.load(path, process=False, force="mesh")
+            if path.suffix.lower() == ".stl":  # a soup of separate triangles: STL has no shared vertices to keep
+                loaded.merge_vertices()
             vertices, faces = np.asarray(loaded.vertices), np.asarray(loaded.faces)
     except Exception as exc:  # unreadable files raise many kinds of error
         raise InputError(f"{path}: not a readable mesh ({type(exc).__name__}: {exc})") from None
@@ -298,9 +315,10 @@ def subdivide(mesh: FaceMesh, levels: int = 1) -> FaceMesh:
 
 
 def obj_text(mesh: FaceMesh, header: str = "") -> str:
-    """A mesh as OBJ text with 6 decimals (1e-6 cm), a commented header first."""
+    """A mesh as OBJ text with 9 significant digits (whatever its units: a face in metres
+    or kilometres keeps its shape), a commented header first."""
     lines = [f"# {line}" for line in header.splitlines()]
-    lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in mesh.vertices]
+    lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in mesh.vertices]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces]
     return "\n".join(lines) + "\n"
 

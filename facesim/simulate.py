@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from . import kernels
-from .errors import InputError, SimulationError
-from .mesh import FaceMesh, diagnose, load_mesh
+from .errors import SimulationError
+from .mesh import FaceMesh, load_face
 from .model import Material, Model, build_model, project_uv
 from .muscles import MuscleSet, load_muscles
 from .spec import Spec, activation_table, pose_table
@@ -93,11 +93,7 @@ class Animation:
 
 @lru_cache(maxsize=8)
 def _mesh_and_muscles(mesh_path: Path, muscles_path: Path, identity=None) -> tuple[FaceMesh, MuscleSet]:
-    mesh = load_mesh(mesh_path, identity)
-    problems = diagnose(mesh)  # the checks of `facesim mesh info`, before any simulation
-    if problems:
-        more = f" (and {len(problems) - 1} more: facesim mesh info {mesh_path})" if len(problems) > 1 else ""
-        raise InputError(f"{mesh_path}: not usable as a face: {problems[0]}{more}")
+    mesh = load_face(mesh_path, identity)  # the checks of `facesim mesh info`, before any simulation
     return mesh, load_muscles(muscles_path, mesh)
 
 
