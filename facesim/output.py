@@ -8,10 +8,8 @@ place when complete (``writers.atomic_path``).
 
 from __future__ import annotations
 
-import multiprocessing
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,9 +19,10 @@ import numpy as np
 from .errors import InputError
 from .render import FaceRenderer, RenderSettings, shared_renderer
 from .simulate import Animation, muscle_forces
-from .workers import die_with_parent
+from .workers import worker_pool
 from .writers import WriteError, atomic_path, check_destination
 
+FULL_DISK = 1 << 20  # bytes free under which a short output is put down to a full disk
 KINDS = {".mp4": "mp4", ".gif": "gif", ".npz": "npz"}
 #: Arrow length per unit of muscle force in --show-muscles (cm per force unit).
 ARROW_SCALE = 0.004
@@ -43,6 +42,15 @@ def check_output(path: Path, force: bool, settings: RenderSettings | None = None
         raise InputError(f"--size: MP4 needs an even width and height, got {settings.width}x{settings.height}")
     check_destination(path, force, directory=kind == "png")
     return kind
+
+
+def why_short(tmp: Path) -> str:
+    """Why a written file came out short, as the end of a sentence: a full disk (as
+    ffmpeg meets it, in its own process, where facesim sees no OSError), or unknown."""
+    import shutil
+
+    free = shutil.disk_usage(tmp.parent).free
+    return f": no space left on device ({free // 1024} KB free)" if free < FULL_DISK else ""
 
 
 def _verify_frames(kind: str, count: int):
@@ -68,9 +76,9 @@ def _verify_frames(kind: str, count: int):
                         image.verify()
                     found += 1
         except Exception as exc:  # a truncated file fails in many ways
-            raise WriteError(f"the written {kind.upper()} does not read back ({type(exc).__name__}): disk full?") from None
+            raise WriteError(f"the written {kind.upper()} does not read back ({type(exc).__name__}){why_short(tmp)}") from None
         if found != count:
-            raise WriteError(f"the written {kind.upper()} holds {found} of {count} frames: disk full?")
+            raise WriteError(f"the written {kind.upper()} holds {found} of {count} frames{why_short(tmp)}")
 
     return verify
 
@@ -118,7 +126,7 @@ def render_frames(animation: Animation, settings: RenderSettings, backend: str =
     chunks = [(animation.positions[a:b], None if arrows is None else arrows[a:b], None if pose is None else pose[a:b],
                animation.jaw[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
     fixed = [(animation.rest, animation.faces, settings, backend, animation.figure)] * len(chunks)
-    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"), initializer=die_with_parent) as pool:
+    with worker_pool(jobs) as pool:
         out = []
         for (positions, *_), images in zip(chunks, pool.map(_render_chunk, *zip(*fixed), *zip(*chunks))):
             out.append(images)
@@ -145,14 +153,19 @@ def write_frames(frames: np.ndarray, path: Path, kind: str, fps: float, replace:
             height, width = frames.shape[1:3]
             writer = imageio_ffmpeg.write_frames(
                 str(tmp), (width, height), fps=fps, codec="libx264", pix_fmt_out="yuv420p",
-                output_params=["-crf", "18", "-preset", "veryfast"], macro_block_size=1, ffmpeg_log_level="error",
+                output_params=["-crf", "18", "-preset", "veryfast"], macro_block_size=1,
+                ffmpeg_log_level="quiet",  # its failures are found by reading the file back
             )
             writer.send(None)
             for frame in frames:
                 writer.send(np.ascontiguousarray(frame))
             writer.close()
-        elif kind == "gif":
-            iio.imwrite(tmp, frames, extension=".gif", duration=1000.0 / fps, loop=0)
+        elif kind == "gif":  # Pillow directly: imageio's plugin flushes again at garbage collection
+            from PIL import Image
+
+            first, *rest = (Image.fromarray(frame) for frame in frames)
+            with open(tmp, "wb") as stream:
+                first.save(stream, format="GIF", save_all=True, append_images=rest, duration=1000.0 / fps, loop=0)
 
 
 def _verify_npz(frames: int):
@@ -161,9 +174,9 @@ def _verify_npz(frames: int):
             with np.load(tmp) as data:
                 complete = data["positions"].shape[0] == frames
         except Exception as exc:  # a truncated archive fails in many ways
-            raise WriteError(f"the written NPZ does not read back ({type(exc).__name__}): disk full?") from None
+            raise WriteError(f"the written NPZ does not read back ({type(exc).__name__}){why_short(tmp)}") from None
         if not complete:
-            raise WriteError("the written NPZ is incomplete: disk full?")
+            raise WriteError(f"the written NPZ is incomplete{why_short(tmp)}")
 
     return verify
 
