@@ -4,14 +4,13 @@ spec is reported and the others still finish."""
 
 from __future__ import annotations
 
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import FacesimError, InputError
 from .render import RenderSettings, shared_renderer
-from .workers import die_with_parent
+from .workers import worker_pool
 
 
 def collect_specs(inputs: list[Path]) -> list[Path]:
@@ -56,7 +55,8 @@ def render_one(spec_path: Path, output: Path, settings: RenderSettings, backend:
         return BatchResult(spec_path, report=write_animation(animation, output, settings, backend=backend, renderer=renderer,
                                                              replace=force))
     except FacesimError as exc:
-        return BatchResult(spec_path, error=str(exc))
+        message = str(exc)  # named by its spec when the fault is in a file the spec names
+        return BatchResult(spec_path, error=message if message.startswith(str(spec_path)) else f"{spec_path}: {message}")
     except Exception as exc:  # a bug must not cost the other specs their results  # noqa: BLE001
         return BatchResult(spec_path, error=f"{spec_path}: failed unexpectedly ({type(exc).__name__}: {exc})")
 
@@ -83,8 +83,7 @@ def run_batch(specs: list[Path], outdir: Path, suffix: str, settings: RenderSett
         for a in args:
             done(render_one(*a))
     else:
-        with ProcessPoolExecutor(min(jobs, len(args)), mp_context=multiprocessing.get_context("spawn"),
-                                 initializer=die_with_parent) as pool:
+        with worker_pool(min(jobs, len(args))) as pool:
             futures = {pool.submit(render_one, *a): a[0] for a in args}
             for future in as_completed(futures):
                 try:

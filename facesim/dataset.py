@@ -35,22 +35,25 @@ import csv
 import hashlib
 import io
 import json
-import multiprocessing
 import os
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, as_completed, wait
+import re
+from concurrent.futures import FIRST_COMPLETED, as_completed, wait
 from dataclasses import asdict, dataclass
 from itertools import repeat
 from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, SimulationError
-from .workers import capped_jobs, die_with_parent
+from .errors import FacesimError, InputError, SimulationError
+from .workers import capped_jobs, worker_pool
 from .writers import atomic_path
 
 #: Samples in flight per worker: enough to keep each busy, few enough that memory stays
 #: flat however many samples a run asks for.
 WINDOW = 4
+#: Seconds to wait for a Dask scheduler to answer.
+SCHEDULER_TIMEOUT = 10.0
+SCHEDULER_ADDRESS = re.compile(r"((tcp|tls|ws|wss)://)?(\[[0-9a-fA-F:.]+\]|[\w.-]+):\d{1,5}/?")
 
 BASIC = ("happy", "sad", "angry", "fear", "disgust", "surprise")
 FRAMES, ONSET = 20, 10
@@ -203,7 +206,7 @@ def _run_local(directory: Path, todo, settings: DatasetSettings, jobs: int, adva
             make_sample(str(directory), i, settings)
             advance()
         return
-    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"), initializer=die_with_parent) as pool:
+    with worker_pool(jobs) as pool:
         pending: set = set()
         for i in todo:  # at most WINDOW samples per worker in flight: memory stays flat in --n
             pending.add(pool.submit(make_sample, str(directory), i, settings))
@@ -228,14 +231,36 @@ def dask_client(scheduler: str | None, jobs: int):
         raise InputError("--executor dask needs dask.distributed: pip install 'dask[distributed]'") from None
     logging.getLogger("distributed").setLevel(logging.ERROR)
     if scheduler:
-        try:
-            return Client(scheduler, timeout="10s")
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise InputError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({type(exc).__name__})") from None
+        return _connect(Client, scheduler)
     cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None)
     client = Client(cluster)
     client._facesim_cluster = cluster
     return client
+
+
+def _connect(Client, scheduler: str):
+    """A client of the scheduler at ``scheduler``, or one line within SCHEDULER_TIMEOUT.
+    Client's own timeout covers the TCP connect, not the handshake: a server that accepts
+    and never answers held it for ever, so the client is made in a thread we stop waiting for."""
+    import threading
+
+    made: dict = {}
+
+    def connect():
+        try:
+            made["client"] = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT}s", set_as_default=False)
+        except Exception as exc:  # noqa: BLE001  (reported below, in the main thread)
+            made["error"] = exc
+
+    if not SCHEDULER_ADDRESS.fullmatch(scheduler):
+        raise InputError(f"--scheduler {scheduler}: expected a scheduler address such as tcp://HOST:PORT")
+    thread = threading.Thread(target=connect, name="facesim-dask-connect", daemon=True)
+    thread.start()
+    thread.join(SCHEDULER_TIMEOUT + 2.0)
+    if "client" in made:
+        return made["client"]
+    why = f"({type(made['error']).__name__})" if "error" in made else f"(no answer within {SCHEDULER_TIMEOUT:g} s)"
+    raise FacesimError(f"--scheduler {scheduler}: cannot reach the Dask scheduler {why}")
 
 
 def run_on_dask(client, function, argument_lists, on_result) -> None:

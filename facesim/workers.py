@@ -21,9 +21,19 @@ WATCH_INTERVAL = 0.5
 _PR_SET_PDEATHSIG = 1
 
 
-def die_with_parent() -> None:
-    """Initializer of every worker process: end when the parent ends."""
-    parent = os.getppid()
+def worker_pool(jobs: int):
+    """A pool of ``jobs`` spawned worker processes that die with this one."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    return ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"), initializer=die_with_parent,
+                               initargs=(os.getpid(),))
+
+
+def die_with_parent(parent: int) -> None:
+    """Initializer of every worker process: end when ``parent`` (the pid of the process
+    that started the pool, passed in: a worker that starts after its parent died finds
+    itself re-parented, and its own getppid() would name the new parent) ends."""
     if sys.platform.startswith("linux"):
         import ctypes
 

@@ -95,15 +95,16 @@ def test_clips_hold_every_frame_and_end_on_the_image(tmp_path):
         assert np.abs(frames[-1].astype(int) - iio.imread(tmp_path / r["image"]).astype(int)).mean() < 3
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--n", "0"], "--n: the number of samples must be at least 1, got 0"),
-    (["--n", "-3"], "--n: the number of samples must be at least 1"),
-    (["--n", "2", "--executor", "dask", "--scheduler", "tcp://127.0.0.1:9"], "cannot reach the Dask scheduler"),
-    (["--n", "2", "--executor", "spark"], "--executor: expected local or dask"),
+@pytest.mark.parametrize("args, code, message", [
+    (["--n", "0"], 2, "--n: the number of samples must be at least 1, got 0"),
+    (["--n", "-3"], 2, "--n: the number of samples must be at least 1"),
+    (["--n", "2", "--executor", "dask", "--scheduler", "tcp://127.0.0.1:9"], 1, "cannot reach the Dask scheduler"),
+    (["--n", "2", "--executor", "spark"], 2, "--executor: expected local or dask"),
 ])
-def test_bad_arguments_are_one_line(tmp_path, args, message):
+def test_bad_arguments_are_one_line(tmp_path, args, code, message):
+    """Bad arguments exit 2; a scheduler that cannot be reached is a failed run (exit 1)."""
     result = subprocess.run([sys.executable, "-m", "facesim", "dataset", "-o", str(tmp_path / "ds"), *args],
                             capture_output=True, text=True, timeout=120)
-    assert result.returncode == 2
+    assert result.returncode == code
     assert result.stderr.strip().splitlines() == [f"facesim: error: {result.stderr.strip().split('error: ', 1)[1]}"]
     assert message in result.stderr and not (tmp_path / "ds").exists()
