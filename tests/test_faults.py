@@ -1,0 +1,433 @@
+"""Every input and every fault, as a hostile tester meets them: bad meshes, bad numbers,
+full disks, --force on what facesim did not write, signals, dead parents, hung
+schedulers, photos of every mode. Each case asserts the exit code, one line on stderr, no
+traceback, and what is left on disk: nothing new, nothing the user had lost."""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
+from facesim.mesh import load_mesh, obj_text, FaceMesh
+from test_cli import SMALL, facesim, one_line_error, write_spec
+
+
+def tree(root: Path) -> dict:
+    """Every file under root with its bytes: what a run must leave as it was."""
+    return {p.relative_to(root): (p.read_bytes() if p.is_file() else None) for p in sorted(root.rglob("*"))}
+
+
+def hopper_spec(tmp_path, mesh, name="spec", muscles=HOPPER_MUSCLES, **fields):
+    return write_spec(tmp_path, name, mesh=str(mesh), muscles=str(muscles), **fields)
+
+
+def broken_face(tmp_path, name, change):
+    """The Hopper face with one defect, as an OBJ."""
+    face = load_mesh(HOPPER_MESH)
+    vertices, faces = change(face.vertices.copy(), face.faces.copy())
+    path = tmp_path / f"{name}.obj"
+    path.write_text(obj_text(FaceMesh(vertices, faces)) if np.isfinite(vertices).all() else
+                    "".join(f"v {x} {y} {z}\n" for x, y, z in vertices) + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces))
+    return path
+
+
+def collapse_an_edge(v, f):
+    v[f[0, 0]] = v[f[0, 1]]  # one vertex moved onto another: zero-area triangles
+    return v, f
+
+
+def add_a_loose_vertex(v, f):
+    return np.vstack([v, v.mean(axis=0)]), f
+
+
+def make_a_coordinate_nan(v, f):
+    v[7, 1] = np.nan
+    return v, f
+
+
+def flip_every_triangle(v, f):
+    return v, f[:, ::-1]
+
+
+def in_kilometres(v, f):
+    return v * 1e-5, f
+
+
+MESH_DEFECTS = [
+    (collapse_an_edge, "no area"),
+    (add_a_loose_vertex, "belong to no triangle"),
+    (make_a_coordinate_nan, "non-finite"),
+    (flip_every_triangle, "face away from +z"),
+    (in_kilometres, "wrong units"),
+]
+
+
+@pytest.mark.parametrize("change, message", MESH_DEFECTS, ids=[c.__name__ for c, _ in MESH_DEFECTS])
+def test_a_broken_mesh_is_one_line_in_every_command(tmp_path, change, message):
+    """Zero-area triangles and loose vertices once reached the kernels (ZeroDivisionError),
+    NaN once proposed vertex 0 for every landmark, a flipped face rendered dark with exit
+    0, a face in kilometres asked for 400,000 sub-steps per frame: each is now refused by
+    the mesh check that `mesh info` reports, before anything runs or is written."""
+    mesh = broken_face(tmp_path, "broken", change)
+    spec = hopper_spec(tmp_path, mesh, activations={"zygomaticus_major_l": 1.0, "jaw": 0.8})
+    before = tree(tmp_path)
+    info = facesim("mesh", "info", mesh)
+    assert info.returncode in (1, 2) and "Traceback" not in info.stderr and message in info.stdout + info.stderr
+    assert "ok: usable" not in info.stdout
+    one_line_error(facesim("render", spec, "-o", tmp_path / "out" / "a.mp4", *SMALL), 2, str(mesh), message)
+    one_line_error(facesim("validate", spec), 2, str(mesh), message)
+    one_line_error(facesim("sheet", spec, "-o", tmp_path / "s.png", "--size", "64x64"), 2, str(mesh), message)
+    one_line_error(facesim("muscles", "--mesh", mesh, "--muscles", HOPPER_MUSCLES), 2, str(mesh), message)
+    if change is make_a_coordinate_nan:  # landmarks and align take meshes in any units and pose, never NaN
+        one_line_error(facesim("mesh", "landmarks", mesh, "-o", tmp_path / "l.yaml"), 2, str(mesh), message)
+    assert tree(tmp_path) == before
+
+
+def test_an_stl_triangle_soup_is_welded_into_a_face(tmp_path):
+    """STL stores every triangle with its own corners; read as it is, a face falls apart
+    into 852 pieces. facesim welds the corners (STL has no vertex order to keep)."""
+    import trimesh
+
+    face = load_mesh(HOPPER_MESH)
+    stl = tmp_path / "face.stl"
+    trimesh.Trimesh(face.vertices, face.faces, process=False).export(stl)
+    result = facesim("mesh", "info", stl, check=0)
+    assert "468 vertices, 852 triangles, 1 piece(s)" in result.stdout and "ok: usable" in result.stdout
+
+
+@pytest.mark.parametrize("force, code, message", [(".inf", 2, "finite number"), ("1e20", 1, "at frame")])
+def test_runaway_muscle_forces(tmp_path, force, code, message):
+    """A force of .inf is no number; one of 1e20 is a number whose simulation diverges,
+    reported with its frame (fastmath once hid the non-finite values: ZeroDivisionError)."""
+    text = HOPPER_MUSCLES.read_text().replace("  force: 200", f"  force: {force}", 1)
+    assert f"force: {force}" in text
+    muscles = tmp_path / "strong.muscles.yaml"
+    muscles.write_text(text)
+    spec = hopper_spec(tmp_path, HOPPER_MESH, muscles=muscles)
+    one_line_error(facesim("render", spec, "-o", tmp_path / "a.mp4", *SMALL), code, message)
+    assert not list(tmp_path.glob("*.mp4")) and not list(tmp_path.glob(".a*"))
+
+
+def test_attachment_true_is_not_vertex_1(tmp_path):
+    text = yaml.safe_load(HOPPER_MUSCLES.read_text())
+    text["muscles"][0]["attachment"] = True
+    muscles = tmp_path / "m.yaml"
+    muscles.write_text(yaml.safe_dump(text))
+    one_line_error(facesim("muscles", "--mesh", HOPPER_MESH, "--muscles", muscles), 2, str(muscles), "attachment")
+
+
+def test_batch_reports_every_spec_when_one_has_a_broken_mesh(tmp_path):
+    """One bad spec once killed the whole batch with no table, and with --jobs 1 the specs
+    after it never ran."""
+    broken = hopper_spec(tmp_path, broken_face(tmp_path, "broken", collapse_an_edge), "a_broken")
+    good = hopper_spec(tmp_path, HOPPER_MESH, "b_good", frames=4, onset=2)
+    out = tmp_path / "out"
+    result = facesim("batch", broken, good, "-o", out, "--jobs", "1", "--format", "npz", *SMALL)
+    assert result.returncode == 1 and "Traceback" not in result.stderr
+    assert "a_broken" in result.stdout and "FAILED" in result.stdout and "b_good" in result.stdout
+    assert (out / "b_good.npz").is_file() and not (out / "a_broken.npz").exists()
+    assert [line for line in result.stderr.splitlines() if line.startswith("facesim: error:")] == [
+        f"facesim: error: {broken}: {tmp_path / 'broken.obj'}: " + result.stderr.split("broken.obj: ", 1)[1].splitlines()[0]]
+
+
+# --- --force and what is already on disk -------------------------------------------------
+
+
+def test_force_never_replaces_what_facesim_did_not_write(tmp_path):
+    """--force once deleted a directory named like the output with everything in it, and
+    unrelated files in a frames directory."""
+    spec = write_spec(tmp_path, frames=2, onset=1)
+    keep = tmp_path / "keep.mp4"
+    keep.mkdir()
+    (keep / "thesis.tex").write_text("years of work")
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    (frames / "frame_0000.png").write_bytes(b"not facesim's")
+    (frames / "notes.txt").write_text("mine")
+    mine = tmp_path / "mine.gif"
+    mine.write_text("a text file called .gif")
+    photo_dir = tmp_path / "photo_out"
+    photo_dir.mkdir()
+    (photo_dir / "x").write_text("x")
+    before = tree(tmp_path)
+    one_line_error(facesim("render", spec, "-o", keep, "--force"), 2, str(keep))
+    one_line_error(facesim("render", spec, "-o", frames, "--force"), 2, str(frames))
+    one_line_error(facesim("render", spec, "-o", mine, "--force"), 2, str(mine))
+    one_line_error(facesim("render", spec, "-o", ".", "--force", cwd=tmp_path), 2)
+    one_line_error(facesim("mesh", "from-photo", tmp_path / "p.png", "-o", photo_dir, "--force"), 2, str(photo_dir))
+    one_line_error(facesim("sheet", spec, "-o", keep, "--force"), 2)
+    assert tree(tmp_path) == before
+
+
+def test_force_replaces_facesims_own_output(tmp_path):
+    spec = write_spec(tmp_path, frames=2, onset=1)
+    out = tmp_path / "a.npz"
+    facesim("render", spec, "-o", out, check=0)
+    first = out.read_bytes()
+    one_line_error(facesim("render", spec, "-o", out), 2, "exists")
+    assert out.read_bytes() == first
+    facesim("render", spec, "-o", out, "--force", check=0)
+    frames = tmp_path / "frames"
+    facesim("render", spec, "-o", frames, *SMALL, check=0)
+    facesim("render", spec, "-o", frames, "--force", *SMALL, check=0)
+    assert sorted(p.name for p in frames.iterdir()) == ["frame_0000.png", "frame_0001.png"]
+
+
+def test_two_renders_to_one_output_cannot_both_win(tmp_path):
+    """Both once succeeded, the second silently replacing the first."""
+    spec = write_spec(tmp_path, frames=8)
+    out = tmp_path / "a.mp4"
+    command = [sys.executable, "-m", "facesim", "render", str(spec), "-o", str(out), *SMALL]
+    runs = [subprocess.Popen(command, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    results = [(p.wait(timeout=300), p.stderr.read()) for p in runs]
+    codes = sorted(code for code, _ in results)
+    assert codes == [0, 2], results
+    loser = next(err for code, err in results if code == 2)
+    assert loser.count("\n") == 1 and "Traceback" not in loser
+    assert "already exists" in loser or "appeared while facesim was writing it" in loser
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.mp4", "spec.yaml"]
+
+
+# --- writes that fail ----------------------------------------------------------------------
+
+
+@contextmanager
+def small_disk(path: Path, size: str):
+    """A tmpfs of ``size`` mounted at path (needs root; the test is skipped otherwise)."""
+    path.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)], capture_output=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs here to fill: {mounted.stderr.decode().strip()[:200]}")
+    try:
+        yield path
+    finally:
+        subprocess.run(["umount", "-l", str(path)], check=False)
+
+
+@pytest.mark.parametrize("name", ["a.mp4", "a.gif", "a.npz", "frames"])
+def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, name):
+    """On a full disk an MP4 was once renamed into place corrupt (4 KB, 'wrote', exit 0) and
+    the other formats ended in an OSError traceback. What the user had there stays."""
+    spec = write_spec(tmp_path, frames=40)  # ~7 KB of MP4: more than the 4 KB left beside precious.txt
+    with small_disk(tmp_path / "disk", "8k") as disk:
+        (disk / "precious.txt").write_text("kept")
+        result = facesim("render", spec, "-o", disk / name, "--size", "256x256")
+        one_line_error(result, 1, name)
+        assert "space" in result.stderr.lower() or "verify" in result.stderr.lower()
+        assert sorted(p.name for p in disk.iterdir()) == ["precious.txt"]
+
+
+def test_a_failed_render_leaves_no_directory_it_made(tmp_path):
+    spec = write_spec(tmp_path, dt=0.5, material={"substeps": 1})  # diverges
+    one_line_error(facesim("render", spec, "-o", tmp_path / "new" / "deeper" / "a.mp4", *SMALL), 1, "at frame")
+    assert not (tmp_path / "new").exists()
+
+
+def wait_for(condition, timeout=120.0, what="the condition"):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        found = condition()
+        if found:
+            return found
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_sigterm_during_the_write_leaves_nothing(tmp_path):
+    """SIGTERM (kill, timeout, job schedulers) once left `.a.partial-PID.mp4` behind."""
+    spec = write_spec(tmp_path, frames=400, onset=4)
+    out = tmp_path / "a.mp4"
+    process = subprocess.Popen([sys.executable, "-m", "facesim", "render", str(spec), "-o", str(out), *SMALL],
+                               stderr=subprocess.PIPE, text=True)
+    partial = wait_for(lambda: [p for p in tmp_path.iterdir() if p.name.startswith(".a")], what="the partial MP4")
+    process.send_signal(signal.SIGTERM)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 128 + signal.SIGTERM, stderr
+    assert "stopped by" in stderr and "Traceback" not in stderr
+    assert not any(p.exists() for p in partial) and list(tmp_path.iterdir()) == [spec]
+
+
+def test_sigterm_stops_a_long_simulation_within_seconds(tmp_path):
+    """The kernel returns to Python every ~0.2 s (it once held Ctrl-C for 36 s)."""
+    spec = write_spec(tmp_path, frames=100000, activations={"zygomaticus_major_l": 0.5})
+    process = subprocess.Popen([sys.executable, "-m", "facesim", "render", str(spec), "-o", str(tmp_path / "a.mp4")],
+                               stderr=subprocess.PIPE, text=True)
+    # the simulation has started once the process has used a few seconds of CPU (imports, cached kernels)
+    wait_for(lambda: cpu_seconds(process.pid) > 6, what="the simulation to start")
+    sent = time.monotonic()
+    process.send_signal(signal.SIGTERM)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 128 + signal.SIGTERM and "Traceback" not in stderr, stderr
+    assert time.monotonic() - sent < 5.0
+    assert list(tmp_path.iterdir()) == [spec]
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+# --- dataset ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("option, message", [
+    (["--size", "0x0"], "--size"),
+    (["--seed", "-1"], "--seed"),
+    (["--backend", "vulkan"], "--backend"),
+    (["--n", "-3"], "--n"),
+    (["--executor", "spark"], "--executor"),
+])
+def test_dataset_checks_its_settings_before_writing(tmp_path, option, message):
+    """`--size 0x0` once wrote dataset.json first, so the corrected rerun was refused."""
+    args = ["--n", "2", *option] if option[0] != "--n" else option
+    one_line_error(facesim("dataset", "-o", tmp_path / "ds", *args), 2, message)
+    assert list(tmp_path.iterdir()) == []
+
+
+def descendants(pid: int) -> set[int]:
+    children = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    found, todo = set(), [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            found.add(child)
+            todo.append(child)
+    return found
+
+
+def alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_killing_the_dataset_leaves_no_worker(tmp_path):
+    """Killing only the main process (SIGKILL: it can do nothing) once orphaned its
+    workers, about 380 MB each, for ever."""
+    process = subprocess.Popen([sys.executable, "-m", "facesim", "dataset", "-o", str(tmp_path / "ds"), "--n", "400",
+                                "--jobs", "2", "--size", "64x64"], stderr=subprocess.DEVNULL)
+    workers = wait_for(lambda: (lambda d: d if len(d) >= 2 else None)(descendants(process.pid)), what="the workers")
+    process.kill()
+    process.wait()
+    wait_for(lambda: not any(alive(p) for p in workers), timeout=15, what="the workers to die")
+
+
+def test_a_scheduler_that_never_answers_times_out(tmp_path):
+    """A Dask scheduler that accepts and never answers once hung `dataset` for ever."""
+    pytest.importorskip("distributed", reason="Dask not installed (pip install -e '.[dask]')")
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(8)  # the kernel accepts connections; nobody ever reads or answers
+        port = server.getsockname()[1]
+        start = time.monotonic()
+        result = facesim("dataset", "-o", tmp_path / "ds", "--n", "2", "--executor", "dask",
+                         "--scheduler", f"tcp://127.0.0.1:{port}")
+    one_line_error(result, 1, f"127.0.0.1:{port}")
+    assert time.monotonic() - start < 120
+    assert not (tmp_path / "ds").exists()
+    malformed = facesim("dataset", "-o", tmp_path / "ds", "--n", "2", "--executor", "dask", "--scheduler", "nonsense:::")
+    one_line_error(malformed, 2, "nonsense:::", "tcp://HOST:PORT")
+    assert not (tmp_path / "ds").exists()
+
+
+def test_jobs_are_capped_to_the_machine(tmp_path):
+    out = tmp_path / "ds"
+    result = facesim("dataset", "-o", out, "--n", "1", "--jobs", "1000", "--size", "64x64", check=0)
+    assert f"--jobs 1000: this machine has {os.cpu_count()} cores" in result.stderr
+
+
+# --- mesh align and photos ---------------------------------------------------------------------
+
+
+def test_a_failed_align_leaves_nothing(tmp_path):
+    """`mesh align` once left its OBJ and muscle file behind when the muscles did not fit
+    the aligned mesh, blocking the rerun with 'already exists'."""
+    import trimesh
+
+    box = trimesh.creation.box(extents=(14, 18, 10))
+    path = tmp_path / "box.ply"
+    box.export(path)
+    corners = {name: int(k % 8) for k, name in enumerate(("eye_outer_r", "eye_outer_l", "nose_tip", "chin",
+                                                           "mouth_corner_r", "mouth_corner_l"))}
+    landmarks = tmp_path / "landmarks.yaml"
+    landmarks.write_text(yaml.safe_dump(corners))
+    before = tree(tmp_path)
+    result = facesim("mesh", "align", path, "--landmarks", landmarks, "-o", tmp_path / "aligned.obj")
+    assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert tree(tmp_path) == before
+
+
+@pytest.fixture(scope="module")
+def astronaut(tmp_path_factory):
+    pytest.importorskip("mediapipe", reason="MediaPipe not installed (pip install -e '.[photo]')")
+    from PIL import Image
+    from skimage import data
+
+    return Image.fromarray(data.astronaut()), tmp_path_factory.mktemp("photos")
+
+
+def save_la(image, root):
+    image.convert("LA").save(root / "la.png")
+    return root / "la.png"
+
+
+def save_palette(image, root):
+    image.convert("P").save(root / "p.png")
+    return root / "p.png"
+
+
+def save_cmyk(image, root):
+    image.convert("CMYK").save(root / "cmyk.jpg")
+    return root / "cmyk.jpg"
+
+
+def save_16_bit(image, root):
+    from PIL import Image
+
+    Image.fromarray(np.asarray(image.convert("L")).astype(np.uint16) * 257).save(root / "grey16.png")
+    return root / "grey16.png"
+
+
+def save_animated(image, root):
+    from PIL import Image
+
+    image.save(root / "anim.gif", save_all=True, append_images=[Image.new("RGB", image.size)], duration=100)
+    return root / "anim.gif"
+
+
+@pytest.mark.parametrize("save", [save_la, save_palette, save_cmyk, save_16_bit, save_animated],
+                         ids=["LA", "P", "CMYK", "16-bit", "animated"])
+def test_photos_of_every_mode_find_the_face_quietly(astronaut, save, tmp_path):
+    """A grey-with-alpha PNG once crashed MediaPipe; CMYK, 16-bit and animated GIFs found no
+    face; every run printed TensorFlow Lite's log lines."""
+    photo = save(*astronaut)
+    result = facesim("mesh", "from-photo", photo, "-o", tmp_path / "face.obj", check=0)
+    assert result.stderr.strip().splitlines() == [f"wrote {tmp_path / 'face.obj'}: 468 vertices, 852 triangles"]
+
+
+@pytest.mark.parametrize("content, message", [(b"hello", "not a readable image"), (None, "truncated")])
+def test_unreadable_photos_are_one_line(astronaut, tmp_path, content, message):
+    photo = tmp_path / "photo.png"
+    if content is None:
+        astronaut[0].save(photo)
+        content = photo.read_bytes()[:20000]
+    photo.write_bytes(content)
+    one_line_error(facesim("mesh", "from-photo", photo, "-o", tmp_path / "face.obj"), 2, str(photo), message)
+    assert list(tmp_path.iterdir()) == [photo]
