@@ -258,7 +258,7 @@ def test_sigterm_during_the_write_leaves_nothing(tmp_path):
 
 def test_sigterm_stops_a_long_simulation_within_seconds(tmp_path):
     """The kernel returns to Python every ~0.2 s (it once held Ctrl-C for 36 s)."""
-    spec = write_spec(tmp_path, frames=100000, activations={"zygomaticus_major_l": 0.5})
+    spec = write_spec(tmp_path, frames=100000, material={"substeps": 20}, activations={"zygomaticus_major_l": 0.5})
     process = subprocess.Popen([sys.executable, "-m", "facesim", "render", str(spec), "-o", str(tmp_path / "a.mp4")],
                                stderr=subprocess.PIPE, text=True)
     # the simulation has started once the process has used a few seconds of CPU (imports, cached kernels)
@@ -269,6 +269,27 @@ def test_sigterm_stops_a_long_simulation_within_seconds(tmp_path):
     assert process.returncode == 128 + signal.SIGTERM and "Traceback" not in stderr, stderr
     assert time.monotonic() - sent < 5.0
     assert list(tmp_path.iterdir()) == [spec]
+    assert "minutes of simulation (Ctrl-C stops it)" in stderr  # said before it started
+
+
+def rss_mb(pid: int) -> float:
+    return int(Path(f"/proc/{pid}/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def test_a_huge_dataset_starts_at_once_and_stays_flat(tmp_path):
+    """`--n 10000000` once spent 130 s before the first sample, then grew ~60 MB/s."""
+    out = tmp_path / "ds"
+    process = subprocess.Popen([sys.executable, "-m", "facesim", "dataset", "-o", str(out), "--n", "10000000",
+                                "--jobs", "1", "--size", "32x32"], stderr=subprocess.DEVNULL)
+    try:
+        labels = lambda: len(list((out / "labels").glob("*.json"))) if (out / "labels").is_dir() else 0  # noqa: E731
+        wait_for(lambda: labels() >= 3, timeout=90, what="the first samples")
+        early = rss_mb(process.pid)
+        wait_for(lambda: labels() >= 25, timeout=120, what="25 samples")
+        assert rss_mb(process.pid) - early < 40, (early, rss_mb(process.pid))
+    finally:
+        process.kill()
+        process.wait()
 
 
 def cpu_seconds(pid: int) -> float:

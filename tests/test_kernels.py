@@ -227,3 +227,16 @@ def test_a_triangle_is_inverted_when_folded_against_the_skin_around_it_not_when_
         pushed = rest.copy()
         pushed[i] = rest[j] + 0.5 * (rest[j] - rest[i])
         assert inverted(pushed) >= 2
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_values_are_found_under_fastmath(bad):
+    """`fastmath` lets the compiler drop math.isfinite (an @njit(fastmath=True) isfinite
+    finds no NaN in [1, nan, inf]); the kernels' check reads the exponent bits instead."""
+    from facesim.kernels import _not_finite
+
+    rows = np.arange(30.0).reshape(10, 3)
+    assert _not_finite(rows) == -1
+    rows[7, 2] = bad
+    assert _not_finite(rows) == 7
+
