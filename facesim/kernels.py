@@ -1,29 +1,29 @@
-"""Numba kernels of the simulation (thesis chapter 3). Arrays and scalars in, outputs
-written into arrays passed last; no Python objects. One kernel per physical term:
+"""Numba kernels of the simulation (thesis chapter 3), one per physical term, in the
+shape of warp.sim: an immutable :data:`ModelArrays` (what ``facesim.model.build_model``
+makes), a :data:`State` (positions x and velocities v, what a step reads and writes), a
+:data:`Control` per frame (activations, and where the bones put the skin and the muscles'
+ends), and a :data:`Forces` accumulator every term adds into. ``facesim.solver`` calls
+them, one line per term.
 
-- ``_spring_terms``     non-linear springs, eq. 3.6 and the g of eq. 3.17
-- ``_repulsion_terms``  edge repulsion, eq. 3.7 and the h of eq. 3.17
-- ``_muscle_forces``    linear muscles, eq. 3.1-3.4, and sphincters (facesim.muscles), in
-                        the 2D projection of eq. 3.21, back-projected onto the mesh
-                        (eq. 3.22-3.25), over the region of influence found by the
-                        stack-based flood fill of section 3.3
-- ``_rig_targets``      where the jaw and eyelids (facesim.rig) take the skin, and
-  ``_muscle_geometry``  where the muscles' ends are as the bones move
-- ``_velocity_update``  the quasi-implicit per-vertex solve of eq. 3.19 (with the Δt on
-                        the spring and repulsion terms that the printed eq. 3.20 drops),
-                        viscous damping eq. 3.10, positions by eq. 3.16
-- ``_simulate``         predictor eq. 3.14 and the above, for every sub-step of every
-                        frame (Algorithm 3.4.1), with per-frame diagnostics.
+- ``_spring_forces``         non-linear springs, eq. 3.6 (their g, eq. 3.17, as stiffness)
+- ``_edge_repulsion_forces`` edge repulsion, eq. 3.7 (its h, eq. 3.17, as stiffness)
+- ``_damping_forces``        viscous damping, eq. 3.10 (taken implicitly by the solvers)
+- ``_tissue_forces``         hypodermis springs to the rig's targets, and the rig's drive
+- ``_muscle_forces``         linear muscles, eq. 3.1-3.4, and sphincters (facesim.muscles),
+                             in the 2D projection of eq. 3.21, back-projected onto the
+                             mesh (eq. 3.22-3.25), over the region of influence found by
+                             the stack-based flood fill of section 3.3
+- ``_rig_control``           where the jaw and eyelids (facesim.rig) take the skin, and
+                             where the muscles' ends are as the bones move
+- ``_contacts``              lips and lids kept apart (a position projection after a step)
 
-The velocity solve, for vertex i with predicted positions X* = X + Δt V (eq. 3.14):
-
-    V' = (m V + Δt T + Δt Σ_j g_ij (X_i - X_j*) + Δt Σ_k h_ik (X_i - P_k*))
-         / (m + Δt c - Δt² (Σ_j g_ij + Σ_k h_ik))
-
-``_spring_terms`` and ``_repulsion_terms`` accumulate the sums of g and h (``stiff``) and
-of the g (X_i - X_j*) and h (X_i - P_k*) products (``pull``; it also carries the
-edge-repulsion reactions, explicitly).
+A term adds, at the predicted positions X* (eq. 3.14), its force F_i and, where its force
+depends on X_i, the scalar stiffness K_i = Σ ∂F_i/∂X_i along the spring (the Σ g + Σ h of
+eq. 3.19; negative for a stretched spring), and damping terms their C_i = -∂F_i/∂V_i.
+A solver turns these into new velocities.
 """
+
+from collections import namedtuple
 
 import math
 
@@ -32,7 +32,54 @@ from numba import njit
 
 from .config import LENGTH_EPS, NEGLIGIBLE_DELTA, NUMBA_OPTIONS
 
-#: Status codes returned by ``_simulate``.
+#: The model's arrays and constants, as the kernels read them (facesim.model.Model.arrays).
+#: Shapes: n vertices, t triangles, s springs, r repulsion pairs, M muscles; the jaw and
+#: eyelid fields are facesim.rig.Rig's, the material's are facesim.model.Material's.
+ModelArrays = namedtuple("ModelArrays", [
+    "rest_position", "faces", "rest_normal", "rest_area", "rest_against", "pinned",
+    "neighbour_start", "neighbour_index", "ring_start", "ring_a", "ring_b",
+    "spring_indices", "spring_rest_length", "repulsion_vertex", "repulsion_edge", "repulsion_rest_distance",
+    "muscle_kind", "muscle_axes", "muscle_insertion", "muscle_centre_start", "muscle_centre_index",
+    "muscle_cos_zone", "muscle_r", "muscle_r_max", "muscle_force", "axis_x", "axis_z", "radius",
+    "jaw_column", "jaw_weight", "jaw_hinge", "jaw_axis", "jaw_max", "lid_column", "lid_centre", "lid_delta",
+    "drive_column", "drive_weight", "contact_upper", "contact_lower", "contact_gap",
+    "mass", "damping", "stiffness", "nonlinearity", "repulsion_nonlinearity", "length_unit", "tissue", "drive",
+    "edge_repulsion", "uv_projection",
+])
+#: What a step reads and advances: positions x and velocities v, (n, 3) each.
+State = namedtuple("State", ["x", "v"])
+#: A frame's controls: ``activation`` (muscles then jaw and lids, one row of the
+#: activation table); ``target`` (n, 3) where the bones take each vertex and ``hold`` (n,)
+#: the drive holding it there; the muscles' ends ``origin`` and ``insertion_point`` (M, 3)
+#: in the frame they act in, from the same bones (``_rig_control``).
+Control = namedtuple("Control", ["activation", "target", "hold", "origin", "insertion_point"])
+#: What the force terms add into: ``force`` (n, 3), ``stiffness`` (n,) the K_i and
+#: ``damping`` (n,) the C_i of the module docstring.
+Forces = namedtuple("Forces", ["force", "stiffness", "damping"])
+#: Scratch arrays of the muscle terms: the points in the muscles' frame (n, 3), the flood
+#: fill's marks, stack, region and δ (n,), and the mark of the latest fill (1,).
+Workspace = namedtuple("Workspace", ["frame", "visited", "stack", "region", "delta", "stamp"])
+
+
+def workspace(n: int) -> Workspace:
+    return Workspace(np.empty((n, 3)), np.zeros(n, dtype=np.int64), np.empty(n, dtype=np.int64),
+                     np.empty(n, dtype=np.int64), np.empty(n), np.zeros(1, dtype=np.int64))
+
+
+def forces(n: int) -> Forces:
+    return Forces(np.zeros((n, 3)), np.zeros(n), np.zeros(n))
+
+
+def control(model: ModelArrays, activation: np.ndarray) -> Control:
+    """The controls of one activation row, the bones placed by ``_rig_control``."""
+    muscles = model.muscle_kind.shape[0]
+    c = Control(np.ascontiguousarray(activation, dtype=np.float64), model.rest_position.copy(),
+                np.zeros(model.rest_position.shape[0]), np.empty((muscles, 3)), np.empty((muscles, 3)))
+    _rig_control(model, c)
+    return c
+
+
+#: Status codes returned by ``facesim.solver._simulate``.
 OK, NOT_FINITE, INVERTED, RUNAWAY = 0, 1, 2, 3
 #: Muscle kinds (facesim.muscles.LINEAR, SPHINCTER).
 LINEAR, SPHINCTER = 0, 1
@@ -79,35 +126,40 @@ def _nonlinear_coefficient(length, rest, k0, exponent, unit):
 
 
 @njit(**NUMBA_OPTIONS)
-def _spring_terms(x, xp, spring_indices, spring_rest_length, k0, gamma, unit, stiff, pull):
-    """Springs on the mesh edges, eq. 3.6, evaluated at the predicted positions xp."""
-    for s in range(spring_indices.shape[0]):
-        i = spring_indices[s, 0]
-        j = spring_indices[s, 1]
+def _spring_forces(model, xp, forces):
+    """Springs on the mesh edges, eq. 3.6, at the predicted positions: F_i = g (X_i* - X_j*)
+    and its g into both ends' stiffness (eq. 3.17)."""
+    for s in range(model.spring_indices.shape[0]):
+        i = model.spring_indices[s, 0]
+        j = model.spring_indices[s, 1]
         dx = xp[i, 0] - xp[j, 0]
         dy = xp[i, 1] - xp[j, 1]
         dz = xp[i, 2] - xp[j, 2]
-        g = _nonlinear_coefficient(math.sqrt(dx * dx + dy * dy + dz * dz), spring_rest_length[s], k0, gamma, unit)
-        stiff[i] += g
-        stiff[j] += g
-        for d in range(3):
-            pull[i, d] += g * (x[i, d] - xp[j, d])
-            pull[j, d] += g * (x[j, d] - xp[i, d])
+        g = _nonlinear_coefficient(math.sqrt(dx * dx + dy * dy + dz * dz), model.spring_rest_length[s],
+                                   model.stiffness, model.nonlinearity, model.length_unit)
+        forces.stiffness[i] += g
+        forces.stiffness[j] += g
+        forces.force[i, 0] += g * dx
+        forces.force[i, 1] += g * dy
+        forces.force[i, 2] += g * dz
+        forces.force[j, 0] -= g * dx
+        forces.force[j, 1] -= g * dy
+        forces.force[j, 2] -= g * dz
 
 
 @njit(**NUMBA_OPTIONS)
-def _tissue_terms(x, target, tissue, hold, stiff, pull):
+def _tissue_forces(model, xp, control, forces):
     """Hypodermis springs: each vertex tied to its target (its rest position, moved by the
     jaw and eyelids) with stiffness k_t + hold_i, the soft tissue that attaches skin to
     bone. Not in the thesis (tissue = 0 is its model); a spring mesh has no bending
     stiffness, so under muscle pull it wrinkles and creeps without ever settling, and
     these springs give every mode a restoring force. ``hold`` holds the skin over the
     mandible and the lid contours to their targets while the jaw and lids move."""
-    for i in range(x.shape[0]):
-        k = tissue + hold[i]
-        stiff[i] -= k
+    for i in range(xp.shape[0]):
+        k = model.tissue + control.hold[i]
+        forces.stiffness[i] -= k
         for d in range(3):
-            pull[i, d] -= k * (x[i, d] - target[i, d])
+            forces.force[i, d] -= k * (xp[i, d] - control.target[i, d])
 
 
 @njit(**NUMBA_OPTIONS)
@@ -127,38 +179,49 @@ def _foot_on_edge(xp, i, a, b, out):
 
 
 @njit(**NUMBA_OPTIONS)
-def _repulsion_terms(x, xp, repulsion_vertex, repulsion_edge, repulsion_rest_distance, k0, zeta, unit, stiff, pull):
+def _edge_repulsion_forces(model, xp, forces):
     """Edge repulsion, eq. 3.7: each vertex is held at its rest altitude above the
     opposite edge of each of its triangles.
 
-    R_ik acts on the vertex (implicitly, through h in the velocity solve) and its
-    reaction -R_ik on the edge's ends, split (1 - t) : t by where the foot P_k lies. The
-    thesis leaves the reaction out, but without it the term is not conservative and a
-    perturbed face at rest never settles (measured: kinetic energy grows); with it the
-    term derives from a potential in the point-to-line distance.
+    R_ik acts on the vertex (with h as its stiffness, eq. 3.17) and its reaction -R_ik on
+    the edge's ends, split (1 - t) : t by where the foot P_k lies. The thesis leaves the
+    reaction out, but without it the term is not conservative and a perturbed face at
+    rest never settles (measured: kinetic energy grows); with it the term derives from a
+    potential in the point-to-line distance.
     """
+    if not model.edge_repulsion:
+        return
     foot = np.empty(3)
-    for r in range(repulsion_vertex.shape[0]):
-        i = repulsion_vertex[r]
-        a = repulsion_edge[r, 0]
-        b = repulsion_edge[r, 1]
+    for r in range(model.repulsion_vertex.shape[0]):
+        i = model.repulsion_vertex[r]
+        a = model.repulsion_edge[r, 0]
+        b = model.repulsion_edge[r, 1]
         t = _foot_on_edge(xp, i, a, b, foot)
         dx = xp[i, 0] - foot[0]
         dy = xp[i, 1] - foot[1]
         dz = xp[i, 2] - foot[2]
-        h = _nonlinear_coefficient(math.sqrt(dx * dx + dy * dy + dz * dz), repulsion_rest_distance[r], k0, zeta, unit)
-        stiff[i] += h
-        pull[i, 0] += h * (x[i, 0] - foot[0])
-        pull[i, 1] += h * (x[i, 1] - foot[1])
-        pull[i, 2] += h * (x[i, 2] - foot[2])
+        h = _nonlinear_coefficient(math.sqrt(dx * dx + dy * dy + dz * dz), model.repulsion_rest_distance[r],
+                                   model.stiffness, model.repulsion_nonlinearity, model.length_unit)
+        forces.stiffness[i] += h
+        forces.force[i, 0] += h * dx
+        forces.force[i, 1] += h * dy
+        forces.force[i, 2] += h * dz
         wa = -(1.0 - t) * h
         wb = -t * h
-        pull[a, 0] += wa * dx
-        pull[a, 1] += wa * dy
-        pull[a, 2] += wa * dz
-        pull[b, 0] += wb * dx
-        pull[b, 1] += wb * dy
-        pull[b, 2] += wb * dz
+        forces.force[a, 0] += wa * dx
+        forces.force[a, 1] += wa * dy
+        forces.force[a, 2] += wa * dz
+        forces.force[b, 0] += wb * dx
+        forces.force[b, 1] += wb * dy
+        forces.force[b, 2] += wb * dz
+
+
+@njit(**NUMBA_OPTIONS)
+def _damping_forces(model, forces):
+    """Viscous damping, eq. 3.10: F = -c V, left to the solver as C_i = c, which it takes
+    at the new velocity (implicitly, as eq. 3.19 does)."""
+    for i in range(forces.damping.shape[0]):
+        forces.damping[i] += model.damping
 
 
 @njit(**NUMBA_OPTIONS)
@@ -199,17 +262,15 @@ def _falloff(ox, oy, oz, ix, iy, iz, px, py, pz, cos_zone, r, r_max):
 
 
 @njit(**NUMBA_OPTIONS)
-def _delta(m, muscle_kind, muscle_axes, muscle_origin, muscle_insertion_point, muscle_cos_zone, muscle_r, muscle_r_max,
-           px, py, pz):
+def _delta(model, m, origin, insertion_point, px, py, pz):
     """δ of muscle m at point P: eq. 3.4 for a linear muscle; for a sphincter, δ_R of
     eq. 3.3 in the elliptical radius ρ = |((u - u_c) / a, (v - v_c) / b)| (1 on its ring)."""
-    if muscle_kind[m] == SPHINCTER:
-        du = (px - muscle_origin[m, 0]) / muscle_axes[m, 0]
-        dv = (py - muscle_origin[m, 1]) / muscle_axes[m, 1]
-        return _radial(math.sqrt(du * du + dv * dv), muscle_r[m], muscle_r_max[m])
-    return _falloff(muscle_origin[m, 0], muscle_origin[m, 1], muscle_origin[m, 2],
-                    muscle_insertion_point[m, 0], muscle_insertion_point[m, 1], muscle_insertion_point[m, 2],
-                    px, py, pz, muscle_cos_zone[m], muscle_r[m], muscle_r_max[m])
+    if model.muscle_kind[m] == SPHINCTER:
+        du = (px - origin[m, 0]) / model.muscle_axes[m, 0]
+        dv = (py - origin[m, 1]) / model.muscle_axes[m, 1]
+        return _radial(math.sqrt(du * du + dv * dv), model.muscle_r[m], model.muscle_r_max[m])
+    return _falloff(origin[m, 0], origin[m, 1], origin[m, 2], insertion_point[m, 0], insertion_point[m, 1],
+                    insertion_point[m, 2], px, py, pz, model.muscle_cos_zone[m], model.muscle_r[m], model.muscle_r_max[m])
 
 
 @njit(**NUMBA_OPTIONS)
@@ -271,30 +332,31 @@ def _back_project(i, fu, fv, uv, xp, neighbour_start, neighbour_index, ring_star
 
 
 @njit(**NUMBA_OPTIONS)
-def _region_of_influence(
-    m, frame, muscle_kind, muscle_axes, muscle_origin, muscle_insertion_point, muscle_insertion, muscle_cos_zone,
-    muscle_r, muscle_r_max, neighbour_start, neighbour_index, visited, stamp, stack, region, delta,
-):
-    """The stack-based flood fill of section 3.3 for muscle m: start at the insertion,
-    pop a vertex, evaluate its δ (eq. 3.4), and push its neighbours only when δ is not
-    negligible. Writes the region's vertices and their δ into ``region`` and ``delta``
-    and returns how many there are. ``visited[i] == stamp`` marks vertex i as pushed."""
+def _region_of_influence(model, m, origin, insertion_point, work):
+    """The stack-based flood fill of section 3.3 for muscle m, over the points
+    ``work.frame``: start at the insertion, pop a vertex, evaluate its δ (eq. 3.4), and
+    push its neighbours only when δ is not negligible. Writes the region's vertices and
+    their δ into ``work.region`` and ``work.delta`` and returns how many there are; a new
+    ``work.stamp`` marks the vertices pushed."""
+    work.stamp[0] += 1
+    stamp = work.stamp[0]
+    frame, visited, stack = work.frame, work.visited, work.stack
+    start = model.muscle_insertion[m]
     count = 0
     top = 0
-    stack[0] = muscle_insertion[m]
-    visited[muscle_insertion[m]] = stamp
+    stack[0] = start
+    visited[start] = stamp
     while top >= 0:
         i = stack[top]
         top -= 1
-        d = _delta(m, muscle_kind, muscle_axes, muscle_origin, muscle_insertion_point, muscle_cos_zone, muscle_r,
-                   muscle_r_max, frame[i, 0], frame[i, 1], frame[i, 2])
+        d = _delta(model, m, origin, insertion_point, frame[i, 0], frame[i, 1], frame[i, 2])
         if d <= NEGLIGIBLE_DELTA:
             continue
-        region[count] = i
-        delta[count] = d
+        work.region[count] = i
+        work.delta[count] = d
         count += 1
-        for k in range(neighbour_start[i], neighbour_start[i + 1]):
-            j = neighbour_index[k]
+        for k in range(model.neighbour_start[i], model.neighbour_start[i + 1]):
+            j = model.neighbour_index[k]
             if visited[j] != stamp:
                 visited[j] = stamp
                 top += 1
@@ -303,47 +365,44 @@ def _region_of_influence(
 
 
 @njit(**NUMBA_OPTIONS)
-def _muscle_forces(
-    frame, xp, activation, muscle_kind, muscle_axes, muscle_origin, muscle_insertion_point, muscle_insertion,
-    muscle_cos_zone, muscle_r, muscle_r_max, muscle_force, pinned, neighbour_start, neighbour_index, ring_start,
-    ring_a, ring_b, uv_projection, force, visited, stamp, stack, region, delta,
-):
-    """Eq. 3.1 on every vertex of each active muscle's region of influence: a pull toward
-    the attachment O of a linear muscle, toward the centre of a sphincter.
+def _muscle_frame(model, xp, frame):
+    """The points the muscles act in: the 2D projection (u, v, 0) of eq. 3.21, or 3D."""
+    for i in range(xp.shape[0]):
+        _frame_point(xp, i, model.axis_x, model.axis_z, model.radius, model.uv_projection, frame[i])
 
-    ``frame`` holds the points the muscles act in: the 2D projection (u, v, 0) of eq. 3.21
-    when ``uv_projection``, the forces then back-projected onto the mesh, or the 3D
-    positions themselves. ``muscle_origin`` and ``muscle_insertion_point`` are O and I at
-    rest in that frame. ``force`` (n, 3) is accumulated into; ``visited``, ``stack``,
-    ``region`` and ``delta`` are (n,) workspaces. Returns the next free stamp.
-    """
+
+@njit(**NUMBA_OPTIONS)
+def _muscle_forces(model, xp, control, work, forces):
+    """Eq. 3.1 on every vertex of each active muscle's region of influence: a pull toward
+    the attachment O of a linear muscle, toward the centre of a sphincter, with O and I
+    where the bones hold them (``control``). In the 2D projection of eq. 3.21 when
+    ``uv_projection``, the forces then back-projected onto the mesh (eq. 3.22-3.25); else
+    in 3D. Muscle forces do not depend on the skin's velocity and add no stiffness."""
+    _muscle_frame(model, xp, work.frame)
+    frame = work.frame
     f3 = np.empty(3)
-    for m in range(muscle_origin.shape[0]):
-        a_m = activation[m]
+    for m in range(model.muscle_kind.shape[0]):
+        a_m = control.activation[m]
         if a_m == 0.0:
             continue
-        stamp += 1
-        count = _region_of_influence(m, frame, muscle_kind, muscle_axes, muscle_origin, muscle_insertion_point,
-                                     muscle_insertion, muscle_cos_zone, muscle_r, muscle_r_max, neighbour_start,
-                                     neighbour_index, visited, stamp, stack, region, delta)
+        count = _region_of_influence(model, m, control.origin, control.insertion_point, work)
         for k in range(count):
-            i = region[k]
-            if pinned[i]:
+            i = work.region[k]
+            if model.pinned[i]:
                 continue
             length = 0.0
             for d in range(3):
-                f3[d] = muscle_origin[m, d] - frame[i, d]
+                f3[d] = control.origin[m, d] - frame[i, d]
                 length += f3[d] ** 2
-            scale = a_m * muscle_force[m] * delta[k] / max(math.sqrt(length), LENGTH_EPS)  # eq. 3.1
-            if uv_projection:
-                _back_project(i, scale * f3[0], scale * f3[1], frame, xp,
-                              neighbour_start, neighbour_index, ring_start, ring_a, ring_b, f3)
+            scale = a_m * model.muscle_force[m] * work.delta[k] / max(math.sqrt(length), LENGTH_EPS)  # eq. 3.1
+            if model.uv_projection:
+                _back_project(i, scale * f3[0], scale * f3[1], frame, xp, model.neighbour_start,
+                              model.neighbour_index, model.ring_start, model.ring_a, model.ring_b, f3)
             else:
                 for d in range(3):
                     f3[d] *= scale
             for d in range(3):
-                force[i, d] += f3[d]
-    return stamp
+                forces.force[i, d] += f3[d]
 
 
 @njit(**NUMBA_OPTIONS)
@@ -359,52 +418,56 @@ def _rotate(px, py, pz, hx, hy, hz, ax, ay, az, angle):
 
 
 @njit(**NUMBA_OPTIONS)
-def _rig_targets(rest_position, controls, jaw_column, jaw_weight, jaw_hinge, jaw_axis, jaw_max, lid_column, lid_centre,
-                 lid_delta, drive_column, drive_weight, drive, target, hold):
-    """Where the jaw and eyelids (facesim.rig) take each vertex under the activations
-    ``controls`` (a row of the activation table): its rest position slid over the eyeball
-    by the lid closure c, in cylindrical coordinates about the eye's horizontal axis,
-    then turned about the jaw hinge by w θ. ``hold`` is the extra stiffness driving the
-    lips and lid contours, drive * min(1, 10 a) for the activation a of their control:
-    zero while the jaw and lids are at rest."""
-    theta = jaw_max * controls[jaw_column] if jaw_column >= 0 else 0.0
-    for i in range(rest_position.shape[0]):
-        px, py, pz = rest_position[i, 0], rest_position[i, 1], rest_position[i, 2]
-        hold[i] = drive * drive_weight[i] * min(1.0, 10.0 * controls[drive_column[i]]) if drive_column[i] >= 0 else 0.0
-        if lid_column[i] >= 0:
-            c = controls[lid_column[i]]
+def _rig_control(model, control):
+    """Where the jaw and eyelids (facesim.rig) take each vertex under the activations of
+    ``control``: its rest position slid over the eyeball by the lid closure c, in
+    cylindrical coordinates about the eye's horizontal axis, then turned about the jaw
+    hinge by w θ, into ``control.target``. ``control.hold`` is the extra stiffness driving
+    the lips and lid contours, drive * min(1, 10 a) for the activation a of their
+    control: zero while the jaw and lids are at rest. Then the muscles' ends, from where
+    the bones hold them (``_muscle_geometry``)."""
+    activation = control.activation
+    theta = model.jaw_max * activation[model.jaw_column] if model.jaw_column >= 0 else 0.0
+    for i in range(model.rest_position.shape[0]):
+        px, py, pz = model.rest_position[i, 0], model.rest_position[i, 1], model.rest_position[i, 2]
+        column = model.drive_column[i]
+        control.hold[i] = model.drive * model.drive_weight[i] * min(1.0, 10.0 * activation[column]) if column >= 0 else 0.0
+        if model.lid_column[i] >= 0:
+            c = activation[model.lid_column[i]]
             if c != 0.0:
-                dy = py - lid_centre[i, 1]
-                dz = pz - lid_centre[i, 2]
-                phi = math.atan2(dy, dz) + c * lid_delta[i, 1]
-                r = math.sqrt(dy * dy + dz * dz) + c * lid_delta[i, 2]
-                px += c * lid_delta[i, 0]
-                py = lid_centre[i, 1] + r * math.sin(phi)
-                pz = lid_centre[i, 2] + r * math.cos(phi)
-        if theta != 0.0 and jaw_weight[i] > 0.0:
-            px, py, pz = _rotate(px, py, pz, jaw_hinge[0], jaw_hinge[1], jaw_hinge[2],
-                                 jaw_axis[0], jaw_axis[1], jaw_axis[2], jaw_weight[i] * theta)
-        target[i, 0] = px
-        target[i, 1] = py
-        target[i, 2] = pz
+                dy = py - model.lid_centre[i, 1]
+                dz = pz - model.lid_centre[i, 2]
+                phi = math.atan2(dy, dz) + c * model.lid_delta[i, 1]
+                r = math.sqrt(dy * dy + dz * dz) + c * model.lid_delta[i, 2]
+                px += c * model.lid_delta[i, 0]
+                py = model.lid_centre[i, 1] + r * math.sin(phi)
+                pz = model.lid_centre[i, 2] + r * math.cos(phi)
+        if theta != 0.0 and model.jaw_weight[i] > 0.0:
+            h, a = model.jaw_hinge, model.jaw_axis
+            px, py, pz = _rotate(px, py, pz, h[0], h[1], h[2], a[0], a[1], a[2], model.jaw_weight[i] * theta)
+        control.target[i, 0] = px
+        control.target[i, 1] = py
+        control.target[i, 2] = pz
+    _muscle_geometry(model, control.target, control.origin, control.insertion_point)
 
 
 @njit(**NUMBA_OPTIONS)
-def _muscle_geometry(target, muscle_kind, muscle_insertion, centre_start, centre_index, axis_x, axis_z, radius,
-                     uv_projection, origin, insertion_point):
+def _muscle_geometry(model, target, origin, insertion_point):
     """The muscles' ends in the frame they act in (eq. 3.21's projection, or 3D), from
-    where the bones hold them: O is the mean of the muscle's centre vertices (a linear
-    muscle's attachment), I its insertion (a sphincter has none; I = O)."""
-    for m in range(muscle_kind.shape[0]):
+    where the bones hold them (``target``): O is the mean of the muscle's centre vertices
+    (a linear muscle's attachment), I its insertion (a sphincter has none; I = O)."""
+    for m in range(model.muscle_kind.shape[0]):
         for d in range(3):
             origin[m, d] = 0.0
-        count = centre_start[m + 1] - centre_start[m]
-        for k in range(centre_start[m], centre_start[m + 1]):
-            _frame_point(target, centre_index[k], axis_x, axis_z, radius, uv_projection, insertion_point[m])
+        count = model.muscle_centre_start[m + 1] - model.muscle_centre_start[m]
+        for k in range(model.muscle_centre_start[m], model.muscle_centre_start[m + 1]):
+            _frame_point(target, model.muscle_centre_index[k], model.axis_x, model.axis_z, model.radius,
+                         model.uv_projection, insertion_point[m])
             for d in range(3):
                 origin[m, d] += insertion_point[m, d] / count
-        if muscle_kind[m] == LINEAR:
-            _frame_point(target, muscle_insertion[m], axis_x, axis_z, radius, uv_projection, insertion_point[m])
+        if model.muscle_kind[m] == LINEAR:
+            _frame_point(target, model.muscle_insertion[m], model.axis_x, model.axis_z, model.radius,
+                         model.uv_projection, insertion_point[m])
         else:
             for d in range(3):
                 insertion_point[m, d] = origin[m, d]
@@ -423,14 +486,15 @@ def _frame_point(x, i, axis_x, axis_z, radius, uv_projection, out):
 
 
 @njit(**NUMBA_OPTIONS)
-def _contacts(x, v, contact_upper, contact_lower, contact_gap, pinned):
+def _contacts(model, state):
     """Lips and lids do not pass through each other: each pair (upper, lower) is kept at
     least its gap apart vertically, by moving both half the overlap and giving them their
     mean vertical velocity (an inelastic contact; a single-layer mesh has no collisions)."""
-    for k in range(contact_upper.shape[0]):
-        u = contact_upper[k]
-        l = contact_lower[k]
-        overlap = contact_gap[k] - (x[u, 1] - x[l, 1])
+    x, v, pinned = state.x, state.v, model.pinned
+    for k in range(model.contact_upper.shape[0]):
+        u = model.contact_upper[k]
+        l = model.contact_lower[k]
+        overlap = model.contact_gap[k] - (x[u, 1] - x[l, 1])
         if overlap <= 0.0:
             continue
         share_u = 0.0 if pinned[u] else (1.0 if pinned[l] else 0.5)
@@ -441,22 +505,6 @@ def _contacts(x, v, contact_upper, contact_lower, contact_gap, pinned):
             mean = 0.5 * (v[u, 1] + v[l, 1])
             v[u, 1] = 0.0 if pinned[u] else mean
             v[l, 1] = 0.0 if pinned[l] else mean
-
-
-@njit(**NUMBA_OPTIONS)
-def _velocity_update(x, v, force, stiff, pull, mass, damping, dt, pinned, v_out):
-    """Eq. 3.19 solved for V' per vertex (see the module docstring). Compressed springs
-    make g positive and shrink the denominator; it is kept at least m, the inertia of the
-    explicit update, so it never reaches zero."""
-    for i in range(x.shape[0]):
-        if pinned[i]:
-            v_out[i, 0] = 0.0
-            v_out[i, 1] = 0.0
-            v_out[i, 2] = 0.0
-            continue
-        denominator = max(mass + dt * damping - dt * dt * stiff[i], mass)
-        for d in range(3):
-            v_out[i, d] = (mass * v[i, d] + dt * force[i, d] + dt * pull[i, d]) / denominator
 
 
 @njit(**NUMBA_OPTIONS)
@@ -517,116 +565,6 @@ def _triangle_checks(x, faces, rest_normal, rest_area, rest_against, normals):
         if first < 0:
             first = t
     return inverted, first, smallest
-
-
-@njit(**NUMBA_OPTIONS)
-def _simulate(
-    faces, rest_normal, rest_area, rest_against, pinned, neighbour_start, neighbour_index, ring_start, ring_a, ring_b,
-    spring_indices, spring_rest_length, repulsion_vertex, repulsion_edge, repulsion_rest_distance,
-    muscle_kind, muscle_axes, muscle_insertion, muscle_centre_start, muscle_centre_index, muscle_cos_zone, muscle_r,
-    muscle_r_max, muscle_force, axis_x, axis_z, radius, rest_position,
-    jaw_column, jaw_weight, jaw_hinge, jaw_axis, jaw_max, lid_column, lid_centre, lid_delta, drive_column,
-    drive_weight, contact_upper, contact_lower, contact_gap, mass, damping, k0, gamma, zeta, length_unit, tissue, drive,
-    edge_repulsion, uv_projection, activations, start, stop, dt, substeps, energy_limit, stop_on_inversion,
-    x, v, positions, kinetic_energy, inverted, smallest_area,
-):
-    """Algorithm 3.4.1: ``substeps`` steps of Δt / substeps per frame, for frames
-    ``start`` to ``stop`` of ``activations`` (frames, muscles and controls): the caller
-    runs a long animation in pieces, so that Ctrl-C and SIGTERM act between them. x and v
-    (n, 3) are the state, advanced in place. Within a frame the controls (jaw, eyelids) move linearly from the previous
-    frame's values, so the targets never jump.
-
-    Writes positions (frames, n, 3) and per-frame diagnostics. Returns (status, frame,
-    element): OK, or the first frame that is NOT_FINITE (element: a vertex), INVERTED
-    (a triangle; only when ``stop_on_inversion``) or RUNAWAY (kinetic energy above
-    ``energy_limit``).
-    """
-    n = x.shape[0]
-    h = dt / substeps
-    xp = np.empty_like(x)
-    frame = np.empty_like(x)
-    v_new = np.empty_like(v)
-    force = np.empty_like(x)
-    pull = np.empty_like(x)
-    stiff = np.empty(n)
-    target = rest_position.copy()
-    normals = np.empty_like(x)
-    hold = np.zeros(n)
-    controls = np.zeros(activations.shape[1])
-    origin = np.empty((muscle_kind.shape[0], 3))
-    insertion_point = np.empty((muscle_kind.shape[0], 3))
-    _muscle_geometry(target, muscle_kind, muscle_insertion, muscle_centre_start, muscle_centre_index,
-                     axis_x, axis_z, radius, uv_projection, origin, insertion_point)
-    rigged = jaw_column >= 0 or lid_column.max() >= 0
-    at_rest = True  # the targets are the rest positions: nothing to recompute while the controls stay at 0
-    visited = np.zeros(n, dtype=np.int64)
-    stack = np.empty(n, dtype=np.int64)
-    region = np.empty(n, dtype=np.int64)
-    delta = np.empty(n)
-    stamp = 0
-    for f in range(start, stop):
-        for s in range(substeps):
-            moving = False
-            if rigged:
-                blend = (s + 1.0) / substeps
-                for c in range(muscle_kind.shape[0], controls.shape[0]):
-                    previous = activations[f - 1, c] if f > 0 else 0.0
-                    controls[c] = previous + blend * (activations[f, c] - previous)
-                    moving = moving or controls[c] != 0.0 or previous != 0.0
-            if moving or not at_rest:
-                at_rest = not moving
-                _rig_targets(rest_position, controls, jaw_column, jaw_weight, jaw_hinge, jaw_axis, jaw_max, lid_column,
-                             lid_centre, lid_delta, drive_column, drive_weight, drive, target, hold)
-                _muscle_geometry(target, muscle_kind, muscle_insertion, muscle_centre_start, muscle_centre_index,
-                                 axis_x, axis_z, radius, uv_projection, origin, insertion_point)
-            for i in range(n):
-                for d in range(3):
-                    if pinned[i]:
-                        x[i, d] = target[i, d]  # the bone holds it
-                        xp[i, d] = x[i, d]
-                    else:
-                        xp[i, d] = x[i, d] + h * v[i, d]  # eq. 3.14
-            stiff[:] = 0.0
-            pull[:] = 0.0
-            force[:] = 0.0
-            _spring_terms(x, xp, spring_indices, spring_rest_length, k0, gamma, length_unit, stiff, pull)
-            _tissue_terms(x, target, tissue, hold, stiff, pull)
-            if edge_repulsion:
-                _repulsion_terms(x, xp, repulsion_vertex, repulsion_edge, repulsion_rest_distance, k0, zeta, length_unit,
-                                 stiff, pull)
-            if uv_projection:
-                _project_uv(xp, axis_x, axis_z, radius, frame)
-            else:
-                frame[:] = xp
-            stamp = _muscle_forces(frame, xp, activations[f], muscle_kind, muscle_axes, origin, insertion_point,
-                                   muscle_insertion, muscle_cos_zone, muscle_r, muscle_r_max, muscle_force, pinned,
-                                   neighbour_start, neighbour_index, ring_start, ring_a, ring_b, uv_projection, force,
-                                   visited, stamp, stack, region, delta)
-            _velocity_update(x, v, force, stiff, pull, mass, damping, h, pinned, v_new)
-            for i in range(n):
-                for d in range(3):
-                    v[i, d] = v_new[i, d]
-                    x[i, d] += h * v[i, d]  # eq. 3.16
-            _contacts(x, v, contact_upper, contact_lower, contact_gap, pinned)
-        bad = _not_finite(x)
-        if bad < 0:
-            bad = _not_finite(v)
-        if bad >= 0:
-            return NOT_FINITE, f, bad
-        energy = 0.0
-        for i in range(n):
-            for d in range(3):
-                energy += 0.5 * mass * v[i, d] * v[i, d]
-                positions[f, i, d] = x[i, d]
-        count, first, smallest = _triangle_checks(x, faces, rest_normal, rest_area, rest_against, normals)
-        kinetic_energy[f] = energy
-        inverted[f] = count
-        smallest_area[f] = smallest
-        if count > 0 and stop_on_inversion:
-            return INVERTED, f, first
-        if energy > energy_limit:
-            return RUNAWAY, f, -1
-    return OK, -1, -1
 
 
 @njit(**NUMBA_OPTIONS)

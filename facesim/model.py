@@ -36,6 +36,7 @@ import numpy as np
 from pydantic import Field
 
 from .errors import InputError
+from .kernels import ModelArrays
 from .mesh import FaceMesh, csr_from_pairs
 from .muscles import SPHINCTER, MuscleSet
 from .rig import Rig, build_rig
@@ -103,6 +104,7 @@ class Model:
     mesh: FaceMesh | None = field(default=None, repr=False, compare=False)  # a head's simulation mesh keeps its head
     resolution: float = 1.0  # s: skin area per vertex over the default face's (module docstring)
     length_unit: float = 1.0  # √s: the unit of stretch in the non-linear springs
+    arrays: ModelArrays | None = field(default=None, repr=False, compare=False)  # all of the above, as the kernels read it
 
     @property
     def vertex_count(self) -> int:
@@ -112,24 +114,6 @@ class Model:
     def muscle_count(self) -> int:
         return len(self.muscle_force)
 
-    def kernel_arrays(self) -> tuple:
-        """The model's arrays in the order ``kernels._simulate`` takes them."""
-        m = self.material
-        return (
-            self.faces, self.rest_normal, self.rest_area, self.rest_against, self.pinned, self.neighbour_start, self.neighbour_index,
-            self.ring_start, self.ring_a, self.ring_b, self.spring_indices, self.spring_rest_length,
-            self.repulsion_vertex, self.repulsion_edge, self.repulsion_rest_distance, self.muscle_kind,
-            self.muscle_axes, self.muscle_insertion, self.muscle_centre_start, self.muscle_centre_index,
-            self.muscle_cos_zone, self.muscle_r, self.muscle_r_max, self.muscle_force, self.axis_x, self.axis_z,
-            self.radius, self.rest_position, *self.rig.arrays(),
-            m.mass, m.damping, m.stiffness, m.nonlinearity, m.repulsion_nonlinearity, self.length_unit, m.tissue, m.drive,
-            m.edge_repulsion, m.uv_projection,
-        )
-
-    def muscle_arrays(self) -> tuple:
-        """The muscle arrays in the order ``kernels._muscle_forces`` takes them (rest geometry)."""
-        return (self.muscle_kind, self.muscle_axes, self.muscle_origin, self.muscle_insertion_point, self.muscle_insertion,
-                self.muscle_cos_zone, self.muscle_r, self.muscle_r_max)
 
 
 def project_uv(points: np.ndarray, axis_x: float, axis_z: float, radius: float) -> np.ndarray:
@@ -189,8 +173,11 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
     from .kernels import _muscle_geometry
 
     origin, insertion = np.empty((muscles.count, 3)), np.empty((muscles.count, 3))
-    _muscle_geometry(x, muscles.kind, muscles.insertion, muscles.centre_start, muscles.centre_index,
-                     axis_x, axis_z, radius, material.uv_projection, origin, insertion)
+    geometry = ModelArrays(**{name: None for name in ModelArrays._fields})._replace(
+        muscle_kind=_frozen(muscles.kind), muscle_centre_start=_frozen(muscles.centre_start),
+        muscle_centre_index=_frozen(muscles.centre_index), muscle_insertion=_frozen(muscles.insertion),
+        axis_x=axis_x, axis_z=axis_z, radius=radius, uv_projection=material.uv_projection)
+    _muscle_geometry(geometry, x, origin, insertion)
     sphincter = muscles.kind == SPHINCTER
     length = np.where(sphincter, 1.0, np.linalg.norm(insertion - origin, axis=1))  # a sphincter's falloff is in ring radii
     muscle_frame = project_uv(x, axis_x, axis_z, radius) if material.uv_projection else x
@@ -229,11 +216,22 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         muscle_r_max=muscles.falloff[:, 1] * length,
         muscle_force=muscles.force * resolution,
     )
+    arrays = {key: _frozen(value) for key, value in arrays.items()}
+    resolved = resolved_material(material, resolution)
+    rig = build_rig(mesh, muscles)
+    length_unit = float(np.sqrt(resolution))
+    constants = dict(axis_x=float(axis_x), axis_z=float(axis_z), radius=float(radius))
+    kernel_arrays = ModelArrays(
+        **{key: arrays[key] for key in ModelArrays._fields if key in arrays}, **constants,
+        **{key: _frozen(np.asarray(value)) for key, value in vars(rig).items() if key not in ("jaw_column", "jaw_max")},
+        jaw_column=int(rig.jaw_column), jaw_max=float(rig.jaw_max),
+        **{key: float(getattr(resolved, key)) for key in ("mass", "damping", "stiffness", "nonlinearity",
+                                                           "repulsion_nonlinearity", "tissue", "drive")},
+        length_unit=length_unit, edge_repulsion=bool(resolved.edge_repulsion), uv_projection=bool(resolved.uv_projection),
+    )
     return Model(
-        **{key: _frozen(value) for key, value in arrays.items()},
-        axis_x=axis_x, axis_z=axis_z, radius=radius, material=resolved_material(material, resolution), muscles=muscles,
-        rig=build_rig(mesh, muscles), scale=mesh.scale, resolution=resolution, length_unit=float(np.sqrt(resolution)),
-        mesh=mesh,
+        **arrays, **constants, material=resolved, muscles=muscles, rig=rig, scale=mesh.scale, resolution=resolution,
+        length_unit=length_unit, mesh=mesh, arrays=kernel_arrays,
     )
 
 

@@ -14,16 +14,14 @@ from .writers import atomic_path
 def muscle_regions(model) -> list[np.ndarray]:
     """Each muscle's region of influence at rest (the flood fill of section 3.3)."""
     from . import kernels
-    from .simulate import muscle_frame
 
-    n = model.vertex_count
-    frame = muscle_frame(model, model.rest_position)
-    visited, stack, region, delta = np.zeros(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n)
+    work = kernels.workspace(model.vertex_count)
+    rest = kernels.control(model.arrays, np.zeros(len(model.muscles.names)))
+    kernels._muscle_frame(model.arrays, model.rest_position, work.frame)
     regions = []
     for m in range(model.muscle_count):
-        count = kernels._region_of_influence(m, frame, *model.muscle_arrays(), model.neighbour_start,
-                                             model.neighbour_index, visited, m + 1, stack, region, delta)
-        regions.append(region[:count].copy())
+        count = kernels._region_of_influence(model.arrays, m, rest.origin, rest.insertion_point, work)
+        regions.append(work.region[:count].copy())
     return regions
 
 

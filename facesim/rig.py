@@ -89,11 +89,6 @@ class Rig:
     contact_lower: np.ndarray
     contact_gap: np.ndarray
 
-    def arrays(self) -> tuple:
-        return (self.jaw_column, self.jaw_weight, self.jaw_hinge, self.jaw_axis, self.jaw_max,
-                self.lid_column, self.lid_centre, self.lid_delta, self.drive_column, self.drive_weight,
-                self.contact_upper, self.contact_lower, self.contact_gap)
-
 
 def eyeball(opening: np.ndarray) -> tuple[np.ndarray, float]:
     """Centre and radius of the eyeball behind an eye opening (its points, (k, 3)):

@@ -2,7 +2,7 @@
 
 ``simulate(spec)`` is the one entry point: it builds (and caches) the model of the spec's
 mesh, muscles and material, turns the spec into a (frames, muscles) activation table,
-runs ``kernels._simulate`` and wraps the result in an :class:`Animation`. A simulation
+runs ``solver._simulate`` and wraps the result in an :class:`Animation`. A simulation
 that blows up raises :class:`SimulationError` naming the frame and the vertex or triangle.
 """
 
@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import kernels
+from . import kernels, solver
 from .errors import SimulationError
 from .mesh import FaceMesh, load_face
-from .model import Material, Model, build_model, project_uv
+from .model import Material, Model, build_model
 from .muscles import MuscleSet, load_muscles
 from .spec import Spec, activation_table, pose_table
 
@@ -145,25 +145,23 @@ def run(
     if activations.ndim != 2 or activations.shape[1] != len(model.muscles.names):
         raise ValueError(f"activations must be (frames, {len(model.muscles.names)}), one column per muscle and control")
     n = model.vertex_count
-    x = model.rest_position.copy()
-    v = np.zeros_like(x)
-    positions = np.empty((frames, n, 3))
-    energy = np.zeros(frames)
-    inverted = np.zeros(frames, dtype=np.int64)
-    smallest = np.zeros(frames)
+    state = kernels.State(model.rest_position.copy(), np.zeros((n, 3)))
+    out = solver.Diagnostics(np.empty((frames, n, 3)), np.zeros(frames), np.zeros(frames, dtype=np.int64), np.zeros(frames))
     frame_speed = RUNAWAY_FRACTION * model.scale / dt
     energy_limit = 0.5 * model.material.mass * n * frame_speed**2
     table = np.ascontiguousarray(activations, dtype=np.float64)
-    arrays = model.kernel_arrays()
+    control = kernels.control(model.arrays, np.zeros(table.shape[1]))
+    work, forces = kernels.workspace(n), kernels.forces(n)
     piece = max(1, int(STEPS_PER_CALL / (model.material.substeps * n)))
     status, frame, element = kernels.OK, -1, -1
     for start in range(0, frames, piece):  # Python between pieces: Ctrl-C and SIGTERM act within about 0.2 s
-        status, frame, element = kernels._simulate(
-            *arrays, table, start, min(frames, start + piece), float(dt), int(model.material.substeps), energy_limit,
-            stop_on_inversion, x, v, positions, energy, inverted, smallest,
+        status, frame, element = solver._simulate(
+            model.arrays, table, start, min(frames, start + piece), float(dt), int(model.material.substeps), energy_limit,
+            stop_on_inversion, state, control, work, forces, out,
         )
         if status != kernels.OK:
             break
+    positions, energy, inverted, smallest = out
     if status == kernels.NOT_FINITE:
         raise SimulationError(f"{source}: simulation diverged at frame {frame}: vertex {element} is not finite", frame)
     if status == kernels.INVERTED:
@@ -203,24 +201,13 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None) -> Animati
     )
 
 
-def muscle_frame(model: Model, positions: np.ndarray) -> np.ndarray:
-    """The points the muscles act in: the 2D projection (u, v, 0) of eq. 3.21, or the 3D
-    positions when the projection is switched off."""
-    if not model.material.uv_projection:
-        return np.array(positions, dtype=np.float64, order="C")
-    return project_uv(positions, model.axis_x, model.axis_z, model.radius)
-
-
 def muscle_forces(model: Model, positions: np.ndarray, activation: np.ndarray) -> np.ndarray:
     """The muscle forces (eq. 3.1-3.25) acting on a face at ``positions`` (n, 3) under
-    ``activation`` (M,): what ``--show-muscles`` draws, as the thesis's figure 3.10."""
+    ``activation`` (one row of the activation table: muscles, then jaw and eyelids), with
+    the muscles' ends where the jaw and lids hold them, as in the step: what
+    ``--show-muscles`` draws, as the thesis's figure 3.10."""
     n = model.vertex_count
     x = np.ascontiguousarray(positions, dtype=np.float64)
-    force = np.zeros_like(x)
-    kernels._muscle_forces(
-        muscle_frame(model, x), x, np.ascontiguousarray(activation, dtype=np.float64), *model.muscle_arrays(),
-        model.muscle_force, model.pinned, model.neighbour_start, model.neighbour_index, model.ring_start, model.ring_a,
-        model.ring_b, model.material.uv_projection, force, np.zeros(n, dtype=np.int64), 0, np.empty(n, dtype=np.int64),
-        np.empty(n, dtype=np.int64), np.empty(n),
-    )
-    return force
+    forces = kernels.forces(n)
+    kernels._muscle_forces(model.arrays, x, kernels.control(model.arrays, activation), kernels.workspace(n), forces)
+    return forces.force

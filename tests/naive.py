@@ -80,16 +80,17 @@ def radial(dist, r, r_max):
         )
 
 
-def delta(model, m, frame):
+def delta(model, m, frame, origin=None, insertion=None):
     """δ of muscle m at every point: eq. 3.4 for a linear muscle; for a sphincter, δ_R of
-    eq. 3.3 in the elliptical radius about its centre."""
-    origin = model.muscle_origin[m]
+    eq. 3.3 in the elliptical radius about its centre. The muscle's ends at rest unless
+    ``origin`` and ``insertion`` (M, 3) say where the bones have taken them."""
+    origin = (model.muscle_origin if origin is None else origin)[m]
+    insertion = (model.muscle_insertion_point if insertion is None else insertion)[m]
     if model.muscle_kind[m] == 1:
         a, b = model.muscle_axes[m]
         rho = np.hypot((frame[:, 0] - origin[0]) / a, (frame[:, 1] - origin[1]) / b)
         return radial(rho, model.muscle_r[m], model.muscle_r_max[m])
-    return falloff(origin, model.muscle_insertion_point[m], frame, model.muscle_cos_zone[m], model.muscle_r[m],
-                   model.muscle_r_max[m])
+    return falloff(origin, insertion, frame, model.muscle_cos_zone[m], model.muscle_r[m], model.muscle_r_max[m])
 
 
 def region_of_influence(delta, insertion, edges, n):
@@ -129,15 +130,17 @@ def back_project(i, force_2d, uv, x, faces, edges):
     return edge / np.linalg.norm(edge) * cosine[best] * magnitude
 
 
-def muscle_forces(model, xp, activation):
-    """Eq. 3.1-3.4 on every vertex of every active muscle's region."""
+def muscle_forces(model, xp, activation, target=None):
+    """Eq. 3.1-3.4 on every vertex of every active muscle's region, the muscles' ends
+    where ``target`` (the bones' positions; rest by default) holds them."""
     force = np.zeros_like(xp)
     use_uv = model.material.uv_projection
     frame = project_uv(xp, model.axis_x, model.axis_z, model.radius) if use_uv else xp
+    origins, insertions = muscle_geometry(model, model.rest_position if target is None else target)
     edges = model.spring_indices
     for m in np.flatnonzero(activation[:model.muscle_count]):
-        origin = model.muscle_origin[m]
-        d = delta(model, m, frame)
+        origin = origins[m]
+        d = delta(model, m, frame, origins, insertions)
         for i in region_of_influence(d, model.muscle_insertion[m], edges, len(xp)):
             if model.pinned[i]:
                 continue
@@ -147,21 +150,60 @@ def muscle_forces(model, xp, activation):
     return force
 
 
+def muscle_geometry(model, target):
+    """Each muscle's O (the mean of its centre vertices) and I (its insertion; a
+    sphincter's is O) in the muscles' frame, from the bones' positions ``target``."""
+    frame = project_uv(target, model.axis_x, model.axis_z, model.radius) if model.material.uv_projection else target
+    muscles = model.muscles
+    origin = np.array([frame[muscles.centre_index[a:b]].mean(axis=0)
+                       for a, b in zip(muscles.centre_start[:-1], muscles.centre_start[1:])])
+    insertion = np.where((model.muscle_kind == 1)[:, None], origin, frame[model.muscle_insertion])
+    return origin, insertion
+
+
+def rig_targets(model, activation):
+    """Where the jaw and eyelids take each vertex (facesim.rig): the lid closure c slides a
+    vertex in cylindrical coordinates (x, φ, r) about its eye's horizontal axis by c times
+    its (Δx, Δφ, Δr); then the jaw turns it by its weight w times θ = activation × max
+    angle about the hinge axis. And the drive holding the lips and lid contours:
+    drive × weight × min(1, 10 a) for the activation a of their control."""
+    from scipy.spatial.transform import Rotation
+
+    rig, p = model.rig, model.rest_position.copy()
+    c = np.where(rig.lid_column >= 0, activation[np.maximum(rig.lid_column, 0)], 0.0)
+    d = p - rig.lid_centre
+    phi = np.arctan2(d[:, 1], d[:, 2]) + c * rig.lid_delta[:, 1]
+    r = np.hypot(d[:, 1], d[:, 2]) + c * rig.lid_delta[:, 2]
+    slid = np.column_stack([p[:, 0] + c * rig.lid_delta[:, 0], rig.lid_centre[:, 1] + r * np.sin(phi),
+                            rig.lid_centre[:, 2] + r * np.cos(phi)])
+    p = np.where((c != 0)[:, None], slid, p)
+    if rig.jaw_column >= 0:
+        angle = rig.jaw_weight * rig.jaw_max * activation[rig.jaw_column]
+        p = rig.jaw_hinge + Rotation.from_rotvec(angle[:, None] * rig.jaw_axis).apply(p - rig.jaw_hinge)
+    driven = rig.drive_column >= 0
+    a = activation[np.maximum(rig.drive_column, 0)]
+    hold = np.where(driven, model.material.drive * rig.drive_weight * np.minimum(1.0, 10.0 * a), 0.0)
+    return p, hold
+
+
 def step(model, x, v, activation, h):
-    """One step: predictor eq. 3.14, forces at the prediction, eq. 3.19 solved for V'
-    (denominator kept at least m), positions eq. 3.16."""
+    """One step: the bones placed for ``activation`` (muscles, then jaw and lids),
+    predictor eq. 3.14 (pinned vertices on their targets), forces at the prediction, eq.
+    3.19 solved for V' (denominator kept at least m), positions eq. 3.16, contacts."""
     mat = model.material
     free = ~model.pinned
+    target, hold = rig_targets(model, activation)
+    x = np.where(free[:, None], x, target)
     xp = np.where(free[:, None], x + h * v, x)
     unit = model.length_unit
     stiff, pull = spring_terms(x, xp, model.spring_indices, model.spring_rest_length, mat.stiffness, mat.nonlinearity, unit)
-    s, p = tissue_terms(x, model.rest_position, mat.tissue)
+    s, p = tissue_terms(x, target, mat.tissue, hold)
     stiff, pull = stiff + s, pull + p
     if mat.edge_repulsion:
         s, p = repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance,
                                mat.stiffness, mat.repulsion_nonlinearity, unit)
         stiff, pull = stiff + s, pull + p
-    force = muscle_forces(model, xp, activation)
+    force = muscle_forces(model, xp, activation, target)
     denominator = np.maximum(mat.mass + h * mat.damping - h * h * stiff, mat.mass)
     v_new = (mat.mass * v + h * force + h * pull) / denominator[:, None]
     v_new[~free] = 0
@@ -188,13 +230,19 @@ def contacts(model, x, v):
 
 
 def simulate(model, activations, dt):
-    """Every frame's positions, ``substeps`` steps per frame."""
+    """Every frame's positions, ``substeps`` steps per frame; within a frame the jaw and
+    lids move linearly from the previous frame's values."""
     x = model.rest_position.copy()
     v = np.zeros_like(x)
-    h = dt / model.material.substeps
+    substeps = model.material.substeps
+    h = dt / substeps
     out = []
+    previous = np.zeros(activations.shape[1])
     for row in activations:
-        for _ in range(model.material.substeps):
-            x, v = step(model, x, v, row, h)
+        for s in range(substeps):
+            blended = row.copy()
+            blended[model.muscle_count:] = previous[model.muscle_count:] + (s + 1) / substeps * (row - previous)[model.muscle_count:]
+            x, v = step(model, x, v, blended, h)
         out.append(x.copy())
+        previous = row
     return np.array(out)

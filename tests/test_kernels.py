@@ -6,7 +6,7 @@ import pytest
 
 import naive
 from conftest import material, spec
-from facesim import kernels as K
+from facesim import kernels as K, solver
 from facesim.simulate import model_for, run
 from facesim.spec import activation_table
 
@@ -28,43 +28,42 @@ def assert_close(actual, expected, rtol=RTOL):
 def test_springs_match_reference(model, rng, unit):
     x, xp = perturbed(model, rng)
     m = model.material
-    stiff, pull = np.zeros(len(x)), np.zeros_like(x)
-    K._spring_terms(x, xp, model.spring_indices, model.spring_rest_length, m.stiffness, m.nonlinearity, unit, stiff, pull)
-    ref_stiff, ref_pull = naive.spring_terms(x, xp, model.spring_indices, model.spring_rest_length, m.stiffness,
-                                             m.nonlinearity, unit)
-    assert_close(stiff, ref_stiff)
-    assert_close(pull, ref_pull)
+    forces = K.forces(len(x))
+    K._spring_forces(model.arrays._replace(length_unit=unit), xp, forces)
+    # the thesis's Σ g (X_i - X_j*) at X = X* is the force at X*
+    ref_stiff, ref_force = naive.spring_terms(xp, xp, model.spring_indices, model.spring_rest_length, m.stiffness,
+                                              m.nonlinearity, unit)
+    assert_close(forces.stiffness, ref_stiff)
+    assert_close(forces.force, ref_force)
 
 
 @pytest.mark.parametrize("zeta", [5.0, 2.5, 0.0])
 def test_edge_repulsion_matches_reference(model, rng, zeta):
     x, xp = perturbed(model, rng)
     k0 = model.material.stiffness
-    stiff, pull = np.zeros(len(x)), np.zeros_like(x)
-    K._repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance, k0, zeta, 1.0,
-                       stiff, pull)
-    ref_stiff, ref_pull = naive.repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge,
-                                                model.repulsion_rest_distance, k0, zeta)
-    assert_close(stiff, ref_stiff)
-    assert_close(pull, ref_pull)
+    forces = K.forces(len(x))
+    K._edge_repulsion_forces(model.arrays._replace(repulsion_nonlinearity=zeta, length_unit=1.0), xp, forces)
+    ref_stiff, ref_force = naive.repulsion_terms(xp, xp, model.repulsion_vertex, model.repulsion_edge,
+                                                 model.repulsion_rest_distance, k0, zeta)
+    assert_close(forces.stiffness, ref_stiff)
+    assert_close(forces.force, ref_force)
 
 
 def test_edge_repulsion_is_zero_at_rest(model):
-    x = model.rest_position.copy()
-    stiff, pull = np.zeros(len(x)), np.zeros_like(x)
-    K._repulsion_terms(x, x, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance, 1000.0, 5.0, 1.0,
-                       stiff, pull)
-    assert np.abs(pull).max() < 1e-9
+    forces = K.forces(model.vertex_count)
+    K._edge_repulsion_forces(model.arrays, model.rest_position.copy(), forces)
+    assert np.abs(forces.force).max() < 1e-9
 
 
 def test_tissue_matches_reference(model, rng):
     x, target = perturbed(model, rng)
     hold = rng.uniform(0, 1000, len(x)) * (rng.uniform(size=len(x)) > 0.8)
-    stiff, pull = np.zeros(len(x)), np.zeros_like(x)
-    K._tissue_terms(x, target, 300.0, hold, stiff, pull)
-    ref_stiff, ref_pull = naive.tissue_terms(x, target, 300.0, hold)
-    assert_close(stiff, ref_stiff)
-    assert_close(pull, ref_pull)
+    control = K.control(model.arrays, np.zeros(len(model.muscles.names)))._replace(target=target, hold=hold)
+    forces = K.forces(len(x))
+    K._tissue_forces(model.arrays._replace(tissue=300.0), x, control, forces)
+    ref_stiff, ref_force = naive.tissue_terms(x, target, 300.0, hold)
+    assert_close(forces.stiffness, ref_stiff)
+    assert_close(forces.force, ref_force)
 
 
 def test_uv_projection_matches_reference(model, rng):
@@ -89,19 +88,16 @@ def cross2(a, b):
     return a[0] * b[1] - a[1] * b[0]
 
 
-def workspaces(n):
-    return np.zeros(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n)
-
-
 @pytest.mark.parametrize("uv", [True, False])
 def test_flood_fill_finds_the_brute_force_region(uv, rng):
     model = model_for(spec("happy", material=material(uv_projection=uv)))
     x, xp = perturbed(model, rng, scale=0.1)
     frame = naive.project_uv(xp, model.axis_x, model.axis_z, model.radius) if uv else xp
-    visited, stack, region, delta = workspaces(model.vertex_count)
+    work = K.workspace(model.vertex_count)
+    work.frame[:] = frame
+    region, delta = work.region, work.delta
     for m in range(model.muscle_count):
-        count = K._region_of_influence(m, frame, *model.muscle_arrays(), model.neighbour_start, model.neighbour_index,
-                                       visited, m + 1, stack, region, delta)
+        count = K._region_of_influence(model.arrays, m, model.muscle_origin, model.muscle_insertion_point, work)
         ref_delta = naive.delta(model, m, frame)
         expected = naive.region_of_influence(ref_delta, model.muscle_insertion[m], model.spring_indices, model.vertex_count)
         assert count > 3, model.muscles.names[m]
@@ -114,12 +110,10 @@ def test_muscle_forces_match_reference(uv, rng):
     model = model_for(spec("happy", material=material(uv_projection=uv)))
     x, xp = perturbed(model, rng, scale=0.05)
     activation = rng.uniform(0, 1, model.muscle_count) * (rng.uniform(size=model.muscle_count) > 0.3)
-    frame = naive.project_uv(xp, model.axis_x, model.axis_z, model.radius) if uv else xp.copy()
-    force = np.zeros_like(x)
-    visited, stack, region, delta = workspaces(model.vertex_count)
-    K._muscle_forces(frame, xp, activation, *model.muscle_arrays(), model.muscle_force, model.pinned,
-                     model.neighbour_start, model.neighbour_index, model.ring_start, model.ring_a, model.ring_b, uv,
-                     force, visited, 0, stack, region, delta)
+    control = K.control(model.arrays, np.concatenate([activation, np.zeros(len(model.muscles.names) - len(activation))]))
+    forces = K.forces(model.vertex_count)
+    K._muscle_forces(model.arrays, xp, control, K.workspace(model.vertex_count), forces)
+    force = forces.force
     expected = naive.muscle_forces(model, xp, activation)
     assert np.abs(expected).max() > 1.0
     assert_close(force, expected)
@@ -181,28 +175,48 @@ def test_back_projection_of_a_force_leaving_the_mesh_keeps_its_component_along_t
 
 
 @pytest.mark.parametrize("switches", [{}, {"edge_repulsion": False}, {"uv_projection": False}])
-def test_step_matches_reference(switches, rng):
+@pytest.mark.parametrize("bones", ["at rest", "moved"])
+def test_step_matches_reference(switches, bones, rng):
+    """One quasi-implicit step against the thesis's form of eq. 3.19 (tests/naive.py),
+    with the jaw and lids at rest or moved (the rig's targets and the muscles' ends)."""
     model = model_for(spec("happy", material=material(**switches)))
     x, _ = perturbed(model, rng, scale=0.05)
     x[model.pinned] = model.rest_position[model.pinned]
     v = rng.standard_normal(x.shape)
     v[model.pinned] = 0
-    activation = np.zeros(len(model.muscles.names))  # the jaw and eyelids stay at rest
+    activation = np.zeros(len(model.muscles.names))
     activation[:model.muscle_count] = rng.uniform(0.2, 1, model.muscle_count)
+    if bones == "moved":
+        activation[model.muscle_count:] = rng.uniform(0.3, 1, len(activation) - model.muscle_count)
     ref_x, ref_v = naive.step(model, x, v, activation, 0.0025)
-    x_k, v_k = x.copy(), v.copy()
-    out = np.empty((1,) + x.shape)
-    diag = np.zeros(1), np.zeros(1, dtype=np.int64), np.zeros(1)
-    m = model.material.model_copy(update={"substeps": 1})
-    arrays = model.kernel_arrays()
-    K._simulate(*arrays, activation[None, :], 0, 1, 0.0025, 1, np.inf, False, x_k, v_k, out, *diag)
-    assert m.substeps == 1
-    assert_close(v_k, ref_v)
-    assert_close(x_k, ref_x)
+    state = K.State(x.copy(), v.copy())
+    n = model.vertex_count
+    solver._quasi_implicit_step(model.arrays, state, K.control(model.arrays, activation), 0.0025, np.empty_like(x),
+                                K.workspace(n), K.forces(n))
+    assert_close(state.v, ref_v)
+    assert_close(state.x, ref_x)
 
 
-def test_whole_happy_run_matches_reference():
-    s = spec("happy")
+@pytest.mark.parametrize("name", ["happy", "surprise"])
+def test_rig_targets_match_reference(name, rng):
+    model = model_for(spec(name))
+    assert model.rig.jaw_column >= 0 and (model.rig.lid_column >= 0).any()
+    for _ in range(3):
+        activation = np.zeros(len(model.muscles.names))
+        activation[model.muscle_count:] = rng.uniform(0, 1, len(activation) - model.muscle_count)
+        control = K.control(model.arrays, activation)
+        target, hold = naive.rig_targets(model, activation)
+        assert np.abs(target - model.rest_position).max() > 0.1
+        assert_close(control.target, target)
+        assert_close(control.hold, hold)
+        origin, insertion = naive.muscle_geometry(model, target)
+        assert_close(control.origin, origin)
+        assert_close(control.insertion_point, insertion)
+
+
+@pytest.mark.parametrize("name", ["happy", "surprise"])  # surprise opens the jaw
+def test_whole_run_matches_reference(name):
+    s = spec(name)
     model = model_for(s)
     table = activation_table(s, model.muscles)
     positions, *_ = run(model, table, s.dt)

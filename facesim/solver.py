@@ -1,0 +1,140 @@
+"""Solvers: from a State and the Forces the terms add, the next State (thesis section 3.4).
+
+``_forces`` is the list of physical terms (facesim.kernels), one line each: adding a
+force term is one kernel there and one line here. A solver step reads the model, the
+state and the frame's control, and advances the state in place:
+
+- ``_quasi_implicit_step``: the thesis's update. Predict X* = X + Δt V (eq. 3.14), add
+  every term's force F, stiffness K and damping C at X*, solve eq. 3.19 for V' vertex by
+  vertex,
+
+      V' = (m V + Δt F - Δt² K V) / (m + Δt C - Δt² K),
+
+  which is eq. 3.19-3.20 with the thesis's Σ g (X_i - X_j*) written as F - Δt K V (and
+  the Δt on the spring and repulsion terms that the printed eq. 3.20 drops); compressed
+  springs make K positive, so the denominator is kept at least m. Then X' = X + Δt V'
+  (eq. 3.16) and the contacts.
+
+``_simulate`` runs Algorithm 3.4.1: ``substeps`` steps per frame, the jaw and eyelids
+moving linearly within a frame, and per-frame diagnostics (finiteness, inverted
+triangles, kinetic energy).
+"""
+
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from . import kernels
+from .config import NUMBA_OPTIONS
+from .kernels import INVERTED, NOT_FINITE, OK, RUNAWAY
+
+#: Per-frame output of ``_simulate``: positions (frames, n, 3), kinetic_energy and
+#: smallest_area (frames,) float, inverted (frames,) int.
+Diagnostics = namedtuple("Diagnostics", ["positions", "kinetic_energy", "inverted", "smallest_area"])
+
+
+@njit(**NUMBA_OPTIONS)
+def _forces(model, xp, control, work, forces):
+    """Every physical term at the predicted positions ``xp``, added into ``forces``."""
+    forces.force[:] = 0.0
+    forces.stiffness[:] = 0.0
+    forces.damping[:] = 0.0
+    kernels._spring_forces(model, xp, forces)  # eq. 3.6
+    kernels._edge_repulsion_forces(model, xp, forces)  # eq. 3.7
+    kernels._damping_forces(model, forces)  # eq. 3.10
+    kernels._tissue_forces(model, xp, control, forces)  # hypodermis, and the rig's drive
+    kernels._muscle_forces(model, xp, control, work, forces)  # eq. 3.1-3.4, 3.21-3.25
+
+
+@njit(**NUMBA_OPTIONS)
+def _predict(model, state, control, h, xp):
+    """X* = X + Δt V (eq. 3.14); a pinned vertex is where its bone holds it."""
+    x, v = state.x, state.v
+    for i in range(x.shape[0]):
+        for d in range(3):
+            if model.pinned[i]:
+                x[i, d] = control.target[i, d]
+                xp[i, d] = x[i, d]
+            else:
+                xp[i, d] = x[i, d] + h * v[i, d]
+
+
+@njit(**NUMBA_OPTIONS)
+def _quasi_implicit_step(model, state, control, h, xp, work, forces):
+    """One step of the thesis's update (module docstring), in place."""
+    _predict(model, state, control, h, xp)
+    _forces(model, xp, control, work, forces)
+    x, v, m = state.x, state.v, model.mass
+    for i in range(x.shape[0]):
+        if model.pinned[i]:
+            for d in range(3):
+                v[i, d] = 0.0
+            continue
+        k = forces.stiffness[i]
+        denominator = max(m + h * forces.damping[i] - h * h * k, m)  # eq. 3.19
+        for d in range(3):
+            v[i, d] = (m * v[i, d] + h * forces.force[i, d] - h * h * k * v[i, d]) / denominator
+            x[i, d] += h * v[i, d]  # eq. 3.16
+    kernels._contacts(model, state)
+
+
+@njit(**NUMBA_OPTIONS)
+def _simulate(model, activations, start, stop, dt, substeps, energy_limit, stop_on_inversion, state, control, work,
+              forces, out):
+    """Algorithm 3.4.1: ``substeps`` steps of Δt / substeps per frame, for frames
+    ``start`` to ``stop`` of ``activations`` (frames, muscles and controls): the caller
+    runs a long animation in pieces, so that Ctrl-C and SIGTERM act between them. The
+    state is advanced in place; ``control`` holds the previous step's bones. Within a
+    frame the controls (jaw, eyelids) move linearly from the previous frame's values, so
+    the targets never jump.
+
+    Writes ``out`` (Diagnostics). Returns (status, frame, element): OK, or the first frame
+    that is NOT_FINITE (element: a vertex), INVERTED (a triangle; only when
+    ``stop_on_inversion``) or RUNAWAY (kinetic energy above ``energy_limit``).
+    """
+    x, v = state.x, state.v
+    n = x.shape[0]
+    muscles = model.muscle_kind.shape[0]
+    h = dt / substeps
+    xp = np.empty_like(x)
+    normals = np.empty_like(x)
+    rigged = model.jaw_column >= 0 or model.lid_column.max() >= 0
+    at_rest = True  # the bones at rest: nothing to recompute while the controls stay at 0
+    for c in range(muscles, activations.shape[1]):
+        at_rest = at_rest and control.activation[c] == 0.0
+    for f in range(start, stop):
+        for c in range(muscles):
+            control.activation[c] = activations[f, c]
+        for s in range(substeps):
+            moving = False
+            if rigged:
+                blend = (s + 1.0) / substeps
+                for c in range(muscles, activations.shape[1]):
+                    previous = activations[f - 1, c] if f > 0 else 0.0
+                    control.activation[c] = previous + blend * (activations[f, c] - previous)
+                    moving = moving or control.activation[c] != 0.0 or previous != 0.0
+            if moving or not at_rest:
+                at_rest = not moving
+                kernels._rig_control(model, control)
+            _quasi_implicit_step(model, state, control, h, xp, work, forces)
+        bad = kernels._not_finite(x)
+        if bad < 0:
+            bad = kernels._not_finite(v)
+        if bad >= 0:
+            return NOT_FINITE, f, bad
+        energy = 0.0
+        for i in range(n):
+            for d in range(3):
+                energy += 0.5 * model.mass * v[i, d] * v[i, d]
+                out.positions[f, i, d] = x[i, d]
+        count, first, smallest = kernels._triangle_checks(x, model.faces, model.rest_normal, model.rest_area,
+                                                  model.rest_against, normals)
+        out.kinetic_energy[f] = energy
+        out.inverted[f] = count
+        out.smallest_area[f] = smallest
+        if count > 0 and stop_on_inversion:
+            return INVERTED, f, first
+        if energy > energy_limit:
+            return RUNAWAY, f, -1
+    return OK, -1, -1

@@ -1,0 +1,67 @@
+"""The physics core's shape: a force term is one kernel and one line. Gravity is added to
+a copy of the package exactly so (a kernel appended to kernels.py, a line in
+solver._forces) and the face sags under it; the unchanged package does not."""
+
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+
+from facesim.config import PROJECT_DIR
+
+GRAVITY = '''
+
+
+@njit(**NUMBA_OPTIONS)
+def _gravity_forces(model, forces):
+    """A toy term: a weight on every vertex, m g downward (g = 100 in facesim's units)."""
+    for i in range(forces.force.shape[0]):
+        forces.force[i, 1] -= model.mass * 100.0
+'''
+LINE = "    kernels._gravity_forces(model, forces)  # a toy term\n"
+ANCHOR = "    kernels._muscle_forces(model, xp, control, work, forces)  # eq. 3.1-3.4, 3.21-3.25\n"
+
+SAG = textwrap.dedent("""
+    import numpy as np
+    from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
+    from facesim.simulate import simulate
+    from facesim.spec import load_spec
+    spec = load_spec("{spec}").with_overrides(mesh=HOPPER_MESH, muscles=HOPPER_MUSCLES)
+    animation = simulate(spec)
+    free = ~animation.model.pinned
+    print(float((animation.positions[-1] - animation.rest)[free, 1].mean()))
+""")
+
+
+def sag(package_root, spec, cache):
+    """Mean vertical displacement (cm) of the free vertices at the last frame of ``spec``,
+    simulated by the facesim found under ``package_root``."""
+    env = dict(os.environ, PYTHONPATH=str(package_root), NUMBA_CACHE_DIR=str(cache))
+    result = subprocess.run([sys.executable, "-c", SAG.format(spec=spec)], capture_output=True, text=True, env=env,
+                            cwd=package_root, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    return float(result.stdout.split()[-1])
+
+
+def test_a_force_term_is_one_kernel_and_one_line(tmp_path):
+    copy = tmp_path / "facesim"
+    shutil.copytree(PROJECT_DIR / "facesim", copy, ignore=shutil.ignore_patterns("__pycache__"))
+    for data in ("meshes", "expressions"):
+        (copy / data).symlink_to(PROJECT_DIR / data)
+    (copy / "kernels.py").write_text((copy / "kernels.py").read_text() + GRAVITY)
+    solver = (copy / "solver.py").read_text()
+    assert solver.count(ANCHOR) == 1
+    (copy / "solver.py").write_text(solver.replace(ANCHOR, ANCHOR + LINE))
+
+    spec = tmp_path / "still.yaml"
+    spec.write_text("name: still\nframes: 20\nactivations: {}\n")
+    with_gravity = sag(tmp_path, spec, tmp_path / "cache")
+    without = sag(PROJECT_DIR, spec, tmp_path / "cache-main")
+    assert abs(without) < 1e-9  # nothing moves a face at rest
+    # a weight of 100 against the tissue springs alone (k = 300 per vertex) would sag 0.33
+    # cm; the skin's springs and pinned rim hold it to less, but it sags
+    assert -0.34 < with_gravity < -0.02
+    assert np.isfinite(with_gravity)
