@@ -71,9 +71,10 @@ def forces(n: int) -> Forces:
 
 
 def control(model: ModelArrays, activation: np.ndarray) -> Control:
-    """The controls of one activation row, the bones placed by ``_rig_control``."""
+    """The controls of one activation row (copied: a solver writes the controls it blends
+    into it), the bones placed by ``_rig_control``."""
     muscles = model.muscle_kind.shape[0]
-    c = Control(np.ascontiguousarray(activation, dtype=np.float64), model.rest_position.copy(),
+    c = Control(np.array(activation, dtype=np.float64), model.rest_position.copy(),
                 np.zeros(model.rest_position.shape[0]), np.empty((muscles, 3)), np.empty((muscles, 3)))
     _rig_control(model, c)
     return c
@@ -225,14 +226,6 @@ def _damping_forces(model, forces):
 
 
 @njit(**NUMBA_OPTIONS)
-def _project_uv(xp, axis_x, axis_z, radius, uv):
-    """Eq. 3.21 with u scaled to arc length: u = R atan2(x - cx, z - cz), v = y (cm).
-    Written as 3D points (u, v, 0) so the falloff code serves both frames."""
-    for i in range(xp.shape[0]):
-        _frame_point(xp, i, axis_x, axis_z, radius, True, uv[i])
-
-
-@njit(**NUMBA_OPTIONS)
 def _radial(dist, r, r_max):
     """δ_R of eq. 3.3: rising from 0 at the origin to 1 at r, falling to 0 at r_max."""
     if dist > r_max:
@@ -366,7 +359,9 @@ def _region_of_influence(model, m, origin, insertion_point, work):
 
 @njit(**NUMBA_OPTIONS)
 def _muscle_frame(model, xp, frame):
-    """The points the muscles act in: the 2D projection (u, v, 0) of eq. 3.21, or 3D."""
+    """The points the muscles act in: the 2D projection of eq. 3.21 with u scaled to arc
+    length, u = R atan2(x - cx, z - cz), v = y (cm), written as 3D points (u, v, 0) so the
+    falloff code serves both frames; or the 3D positions."""
     for i in range(xp.shape[0]):
         _frame_point(xp, i, model.axis_x, model.axis_z, model.radius, model.uv_projection, frame[i])
 

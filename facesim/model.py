@@ -115,18 +115,6 @@ class Model:
         return len(self.muscle_force)
 
 
-
-def project_uv(points: np.ndarray, axis_x: float, axis_z: float, radius: float) -> np.ndarray:
-    """Eq. 3.21 with u as arc length on the fitted cylinder: (R atan2(x - cx, z - cz), y, 0),
-    by the same kernel the simulation steps with."""
-    from .kernels import _project_uv
-
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    frame = np.empty_like(points)
-    _project_uv(points, axis_x, axis_z, radius, frame)
-    return frame
-
-
 def against_surroundings(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Which triangles face against the skin around them (a few, in the sharpest creases)."""
     from .kernels import _against_surroundings, _vertex_normals
@@ -170,24 +158,8 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
 
     axis_x, axis_z, radius = mesh.vertical_axis
     resolution = float(mesh.face_areas.sum() / n / REFERENCE_VERTEX_AREA)
-    from .kernels import _muscle_geometry
-
-    origin, insertion = np.empty((muscles.count, 3)), np.empty((muscles.count, 3))
-    geometry = ModelArrays(**{name: None for name in ModelArrays._fields})._replace(
-        muscle_kind=_frozen(muscles.kind), muscle_centre_start=_frozen(muscles.centre_start),
-        muscle_centre_index=_frozen(muscles.centre_index), muscle_insertion=_frozen(muscles.insertion),
-        axis_x=axis_x, axis_z=axis_z, radius=radius, uv_projection=material.uv_projection)
-    _muscle_geometry(geometry, x, origin, insertion)
-    sphincter = muscles.kind == SPHINCTER
-    length = np.where(sphincter, 1.0, np.linalg.norm(insertion - origin, axis=1))  # a sphincter's falloff is in ring radii
-    muscle_frame = project_uv(x, axis_x, axis_z, radius) if material.uv_projection else x
-    axes = np.zeros((muscles.count, 2))
-    for m in np.flatnonzero(sphincter):
-        axes[m] = ellipse_axes(muscle_frame[muscles.ring[m], :2] - origin[m, :2],
-                               f"{muscles.source}: muscle {muscles.names[m]}: ring")
-
     start, index = mesh.neighbours
-    arrays = dict(
+    arrays = {key: _frozen(value) for key, value in dict(
         rest_position=x,
         faces=faces,
         rest_normal=mesh.face_normals,
@@ -205,33 +177,46 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         repulsion_edge=repulsion_edge,
         repulsion_rest_distance=altitude,
         muscle_kind=muscles.kind,
-        muscle_axes=axes,
-        muscle_origin=origin,
-        muscle_insertion_point=insertion,
         muscle_insertion=muscles.insertion,
         muscle_centre_start=muscles.centre_start,
         muscle_centre_index=muscles.centre_index,
         muscle_cos_zone=np.cos(muscles.zone),
-        muscle_r=muscles.falloff[:, 0] * length,
-        muscle_r_max=muscles.falloff[:, 1] * length,
         muscle_force=muscles.force * resolution,
-    )
-    arrays = {key: _frozen(value) for key, value in arrays.items()}
+        # the falloffs, in muscle lengths, are set below, from the muscles' ends at rest
+        muscle_axes=np.zeros((muscles.count, 2)),
+        muscle_r=np.zeros(muscles.count),
+        muscle_r_max=np.zeros(muscles.count),
+    ).items()}
     resolved = resolved_material(material, resolution)
     rig = build_rig(mesh, muscles)
     length_unit = float(np.sqrt(resolution))
     constants = dict(axis_x=float(axis_x), axis_z=float(axis_z), radius=float(radius))
     kernel_arrays = ModelArrays(
-        **{key: arrays[key] for key in ModelArrays._fields if key in arrays}, **constants,
+        **arrays, **constants,
         **{key: _frozen(np.asarray(value)) for key, value in vars(rig).items() if key not in ("jaw_column", "jaw_max")},
         jaw_column=int(rig.jaw_column), jaw_max=float(rig.jaw_max),
         **{key: float(getattr(resolved, key)) for key in ("mass", "damping", "stiffness", "nonlinearity",
                                                            "repulsion_nonlinearity", "tissue", "drive")},
         length_unit=length_unit, edge_repulsion=bool(resolved.edge_repulsion), uv_projection=bool(resolved.uv_projection),
     )
+
+    from .kernels import _muscle_frame, control
+
+    rest = control(kernel_arrays, np.zeros(len(muscles.names)))  # O and I where the bones hold them at rest
+    origin, insertion = rest.origin, rest.insertion_point
+    sphincter = muscles.kind == SPHINCTER
+    length = np.where(sphincter, 1.0, np.linalg.norm(insertion - origin, axis=1))  # a sphincter's falloff is in ring radii
+    frame = np.empty_like(x)
+    _muscle_frame(kernel_arrays, arrays["rest_position"], frame)
+    axes = np.zeros((muscles.count, 2))
+    for m in np.flatnonzero(sphincter):
+        axes[m] = ellipse_axes(frame[muscles.ring[m], :2] - origin[m, :2], f"{muscles.source}: muscle {muscles.names[m]}: ring")
+    falloffs = {key: _frozen(value) for key, value in dict(
+        muscle_axes=axes, muscle_r=muscles.falloff[:, 0] * length, muscle_r_max=muscles.falloff[:, 1] * length).items()}
+    arrays.update(falloffs, muscle_origin=_frozen(origin), muscle_insertion_point=_frozen(insertion))
     return Model(
         **arrays, **constants, material=resolved, muscles=muscles, rig=rig, scale=mesh.scale, resolution=resolution,
-        length_unit=length_unit, mesh=mesh, arrays=kernel_arrays,
+        length_unit=length_unit, mesh=mesh, arrays=kernel_arrays._replace(**falloffs),
     )
 
 

@@ -129,7 +129,7 @@ def _simulate(model, activations, start, stop, dt, substeps, energy_limit, stop_
                 energy += 0.5 * model.mass * v[i, d] * v[i, d]
                 out.positions[f, i, d] = x[i, d]
         count, first, smallest = kernels._triangle_checks(x, model.faces, model.rest_normal, model.rest_area,
-                                                  model.rest_against, normals)
+                                                          model.rest_against, normals)
         out.kinetic_energy[f] = energy
         out.inverted[f] = count
         out.smallest_area[f] = smallest
