@@ -48,6 +48,9 @@ NEGLIGIBLE_DELTA = 1e-6
 
 #: Lengths shorter than this (cm) are treated as zero (degenerate edges, triangles).
 LENGTH_EPS = 1e-12
+#: A triangle with less area than this fraction of its mesh's squared size has none
+#: (``facesim mesh info`` and the check before every simulation refuse it).
+DEGENERATE_AREA = 1e-10
 
 #: A muscle whose insertion lies closer to the midline than this fraction of the
 #: face width is taken to be a midline muscle (no ``_l``/``_r`` side).

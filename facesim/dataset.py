@@ -53,6 +53,7 @@ from .writers import atomic_path
 WINDOW = 4
 #: Seconds to wait for a Dask scheduler to answer.
 SCHEDULER_TIMEOUT = 10.0
+#: What --scheduler takes: [tcp|tls|ws|wss://]HOST:PORT.
 SCHEDULER_ADDRESS = re.compile(r"((tcp|tls|ws|wss)://)?(\[[0-9a-fA-F:.]+\]|[\w.-]+):\d{1,5}/?")
 
 BASIC = ("happy", "sad", "angry", "fear", "disgust", "surprise")
@@ -244,6 +245,8 @@ def _connect(Client, scheduler: str):
     and never answers held it for ever, so the client is made in a thread we stop waiting for."""
     import threading
 
+    if not SCHEDULER_ADDRESS.fullmatch(scheduler):
+        raise InputError(f"--scheduler {scheduler}: expected a scheduler address such as tcp://HOST:PORT")
     made: dict = {}
 
     def connect():
@@ -252,8 +255,6 @@ def _connect(Client, scheduler: str):
         except Exception as exc:  # noqa: BLE001  (reported below, in the main thread)
             made["error"] = exc
 
-    if not SCHEDULER_ADDRESS.fullmatch(scheduler):
-        raise InputError(f"--scheduler {scheduler}: expected a scheduler address such as tcp://HOST:PORT")
     thread = threading.Thread(target=connect, name="facesim-dask-connect", daemon=True)
     thread.start()
     thread.join(SCHEDULER_TIMEOUT + 2.0)

@@ -13,11 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import LENGTH_EPS
-
-#: A triangle with less area than this fraction of the mesh's squared size has none.
-DEGENERATE_AREA = 1e-10
-
+from .config import DEGENERATE_AREA, LENGTH_EPS
 from .errors import InputError
 
 
