@@ -5,7 +5,6 @@ them (a process keeps the first OpenGL platform it loads)."""
 import signal
 import subprocess
 import sys
-import time
 
 import imageio.v3 as iio
 import numpy as np
@@ -13,7 +12,7 @@ import pytest
 import yaml
 
 import facesim as facesim_api
-from conftest import EXPRESSIONS, THESIS_EXPRESSIONS
+from conftest import EXPRESSIONS, THESIS_EXPRESSIONS, cpu_seconds, wait_for
 
 SMALL = ["--size", "160x160"]
 
@@ -242,7 +241,7 @@ def test_ctrl_c_leaves_nothing_behind(tmp_path):
     process = subprocess.Popen([sys.executable, "-m", "facesim", "render", str(spec), "-o", str(out), *SMALL],
                                stderr=subprocess.PIPE, text=True,
                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    time.sleep(8)
+    wait_for(lambda: cpu_seconds(process.pid) > 6, what="the render to start")
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 130, stderr

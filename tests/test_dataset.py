@@ -4,13 +4,13 @@ import hashlib
 import signal
 import subprocess
 import sys
-import time
 
 import pytest
 
 pytest.importorskip("dask.distributed")
 
 import numpy as np  # noqa: E402
+from conftest import wait_for  # noqa: E402
 from facesim.dataset import POSE_JITTER, DatasetSettings, build_dataset, read_manifest, sample  # noqa: E402
 from facesim.errors import InputError  # noqa: E402
 
@@ -57,9 +57,7 @@ def test_an_interrupted_run_completes_with_nothing_duplicated_or_missing(tmp_pat
     command = [sys.executable, "-m", "facesim", "dataset", "--n", "10", "--seed", "7", "--size", "64x64", "--jitter",
                "-o", str(directory), "--jobs", "2"]
     process = subprocess.Popen(command, stderr=subprocess.DEVNULL, start_new_session=True)
-    deadline = time.time() + 120
-    while len(list(directory.glob("labels/*.json"))) < 3 and time.time() < deadline:
-        time.sleep(0.05)
+    wait_for(lambda: len(list(directory.glob("labels/*.json"))) >= 3, what="three samples")
     import os
 
     os.killpg(process.pid, signal.SIGKILL)  # the whole run dies, workers included

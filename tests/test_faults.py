@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import yaml
 
+from conftest import cpu_seconds, wait_for
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
 from facesim.mesh import load_mesh, obj_text, FaceMesh
 from test_cli import SMALL, facesim, one_line_error, write_spec
@@ -232,16 +233,6 @@ def test_a_failed_render_leaves_no_directory_it_made(tmp_path):
     assert not (tmp_path / "new").exists()
 
 
-def wait_for(condition, timeout=120.0, what="the condition"):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        found = condition()
-        if found:
-            return found
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
-
-
 def test_sigterm_during_the_write_leaves_nothing(tmp_path):
     """SIGTERM (kill, timeout, job schedulers) once left `.a.partial-PID.mp4` behind."""
     spec = write_spec(tmp_path, frames=400, onset=4)
@@ -290,11 +281,6 @@ def test_a_huge_dataset_starts_at_once_and_stays_flat(tmp_path):
     finally:
         process.kill()
         process.wait()
-
-
-def cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 # --- dataset ---------------------------------------------------------------------------------
