@@ -44,7 +44,7 @@ ModelArrays = namedtuple("ModelArrays", [
     "jaw_column", "jaw_weight", "jaw_hinge", "jaw_axis", "jaw_max", "lid_column", "lid_centre", "lid_delta",
     "drive_column", "drive_weight", "contact_upper", "contact_lower", "contact_gap",
     "mass", "damping", "stiffness", "nonlinearity", "repulsion_nonlinearity", "length_unit", "tissue", "drive",
-    "edge_repulsion", "uv_projection",
+    "edge_repulsion", "uv_projection", "implicit", "iterations", "tolerance",
 ])
 #: What a step reads and advances: positions x and velocities v, (n, 3) each.
 State = namedtuple("State", ["x", "v"])
@@ -53,9 +53,18 @@ State = namedtuple("State", ["x", "v"])
 #: the drive holding it there; the muscles' ends ``origin`` and ``insertion_point`` (M, 3)
 #: in the frame they act in, from the same bones (``_rig_control``).
 Control = namedtuple("Control", ["activation", "target", "hold", "origin", "insertion_point"])
+#: The whole stiffness K = -∂F/∂X that an implicit solver needs, where the K_i above keep
+#: one number per vertex: link l joins the vertices ``node[l]`` (3) with weights
+#: ``weight[l]``, its extension u = Σ_k w_k X_node[l, k] (a spring: X_i - X_j; edge
+#: repulsion: X_i - P_k), and adds w_p w_q B to the 3x3 block (p, q) of K, with
+#: B = along a aᵀ + across (I - a aᵀ) for its unit ``axis`` a; ``diagonal`` (n,) adds an
+#: isotropic stiffness per vertex (the hypodermis). B is positive semi-definite: along is
+#: the derivative of the tension, across the tension over the length, and 0 when
+#: compressed (the usual clamp: a compressed spring's sideways instability is left out).
+Links = namedtuple("Links", ["node", "weight", "axis", "along", "across", "diagonal"])
 #: What the force terms add into: ``force`` (n, 3), ``stiffness`` (n,) the K_i and
-#: ``damping`` (n,) the C_i of the module docstring.
-Forces = namedtuple("Forces", ["force", "stiffness", "damping"])
+#: ``damping`` (n,) the C_i of the module docstring, and the ``links`` of K.
+Forces = namedtuple("Forces", ["force", "stiffness", "damping", "links"])
 #: Scratch arrays of the muscle terms: the points in the muscles' frame (n, 3), the flood
 #: fill's marks, stack, region and δ (n,), and the mark of the latest fill (1,).
 Workspace = namedtuple("Workspace", ["frame", "visited", "stack", "region", "delta", "stamp"])
@@ -66,8 +75,13 @@ def workspace(n: int) -> Workspace:
                      np.empty(n, dtype=np.int64), np.empty(n), np.zeros(1, dtype=np.int64))
 
 
-def forces(n: int) -> Forces:
-    return Forces(np.zeros((n, 3)), np.zeros(n), np.zeros(n))
+def forces(model: ModelArrays) -> Forces:
+    """Zeroed accumulators for a model: one link per spring, then one per repulsion pair."""
+    n = model.rest_position.shape[0]
+    count = model.spring_indices.shape[0] + model.repulsion_vertex.shape[0]
+    links = Links(np.zeros((count, 3), dtype=np.int64), np.zeros((count, 3)), np.zeros((count, 3)), np.zeros(count),
+                  np.zeros(count), np.zeros(n))
+    return Forces(np.zeros((n, 3)), np.zeros(n), np.zeros(n), links)
 
 
 def control(model: ModelArrays, activation: np.ndarray) -> Control:
@@ -118,26 +132,51 @@ def _power(base, exponent):
 
 @njit(**NUMBA_OPTIONS)
 def _nonlinear_coefficient(length, rest, k0, exponent, unit):
-    """-(1 + ((|X| - d) / u)²)^γ k0 (|X| - d) / |X|: the g of eq. 3.17 (h with ζ). The
+    """The g of eq. 3.17 (h with ζ), -(1 + ((|X| - d) / u)²)^γ k0 (|X| - d) / |X|, and the
+    derivative of the tension φ = -g |X| = k0 (1 + s²)^γ (|X| - d), s = (|X| - d) / u:
+    dφ/d|X| = k0 (1 + s²)^(γ-1) (1 + (2γ + 1) s²), the stiffness along the link. The
     thesis's stretch is in cm (u = 1); on a finer mesh of the same face u is its edge
     length relative to the default face's, so the same strain stiffens the same way."""
     stretch = length - rest
     relative = stretch / unit
-    return -_power(1.0 + relative * relative, exponent) * k0 * stretch / max(length, LENGTH_EPS)
+    square = relative * relative
+    factor = _power(1.0 + square, exponent - 1.0)
+    g = -factor * (1.0 + square) * k0 * stretch / max(length, LENGTH_EPS)
+    return g, k0 * factor * (1.0 + (2.0 * exponent + 1.0) * square)
+
+
+@njit(**NUMBA_OPTIONS)
+def _set_link(links, l, i, j, k, wi, wj, wk, dx, dy, dz, length, g, along):
+    """Link l of K (``Links``): nodes i, j, k with weights, axis (dx, dy, dz) / length,
+    the tension's derivative ``along`` and -g (the tension over the length, eq. 3.17's g
+    with its sign turned) across, clamped at 0."""
+    links.node[l, 0] = i
+    links.node[l, 1] = j
+    links.node[l, 2] = k
+    links.weight[l, 0] = wi
+    links.weight[l, 1] = wj
+    links.weight[l, 2] = wk
+    inverse = 1.0 / max(length, LENGTH_EPS)
+    links.axis[l, 0] = dx * inverse
+    links.axis[l, 1] = dy * inverse
+    links.axis[l, 2] = dz * inverse
+    links.along[l] = along
+    links.across[l] = max(-g, 0.0)
 
 
 @njit(**NUMBA_OPTIONS)
 def _spring_forces(model, xp, forces):
-    """Springs on the mesh edges, eq. 3.6, at the predicted positions: F_i = g (X_i* - X_j*)
-    and its g into both ends' stiffness (eq. 3.17)."""
+    """Springs on the mesh edges, eq. 3.6, at the predicted positions: F_i = g (X_i* - X_j*),
+    its g into both ends' stiffness (eq. 3.17), and spring s as link s of K."""
     for s in range(model.spring_indices.shape[0]):
         i = model.spring_indices[s, 0]
         j = model.spring_indices[s, 1]
         dx = xp[i, 0] - xp[j, 0]
         dy = xp[i, 1] - xp[j, 1]
         dz = xp[i, 2] - xp[j, 2]
-        g = _nonlinear_coefficient(math.sqrt(dx * dx + dy * dy + dz * dz), model.spring_rest_length[s],
-                                   model.stiffness, model.nonlinearity, model.length_unit)
+        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        g, along = _nonlinear_coefficient(length, model.spring_rest_length[s], model.stiffness, model.nonlinearity,
+                                          model.length_unit)
         forces.stiffness[i] += g
         forces.stiffness[j] += g
         forces.force[i, 0] += g * dx
@@ -146,6 +185,7 @@ def _spring_forces(model, xp, forces):
         forces.force[j, 0] -= g * dx
         forces.force[j, 1] -= g * dy
         forces.force[j, 2] -= g * dz
+        _set_link(forces.links, s, i, j, j, 1.0, -1.0, 0.0, dx, dy, dz, length, g, along)
 
 
 @njit(**NUMBA_OPTIONS)
@@ -159,6 +199,7 @@ def _tissue_forces(model, xp, control, forces):
     for i in range(xp.shape[0]):
         k = model.tissue + control.hold[i]
         forces.stiffness[i] -= k
+        forces.links.diagonal[i] += k
         for d in range(3):
             forces.force[i, d] -= k * (xp[i, d] - control.target[i, d])
 
@@ -188,11 +229,12 @@ def _edge_repulsion_forces(model, xp, forces):
     the edge's ends, split (1 - t) : t by where the foot P_k lies. The thesis leaves the
     reaction out, but without it the term is not conservative and a perturbed face at
     rest never settles (measured: kinetic energy grows); with it the term derives from a
-    potential in the point-to-line distance.
+    potential in the point-to-line distance. Pair r is link s + r of K (s springs).
     """
     if not model.edge_repulsion:
         return
     foot = np.empty(3)
+    springs = model.spring_indices.shape[0]
     for r in range(model.repulsion_vertex.shape[0]):
         i = model.repulsion_vertex[r]
         a = model.repulsion_edge[r, 0]
@@ -201,8 +243,11 @@ def _edge_repulsion_forces(model, xp, forces):
         dx = xp[i, 0] - foot[0]
         dy = xp[i, 1] - foot[1]
         dz = xp[i, 2] - foot[2]
-        h = _nonlinear_coefficient(math.sqrt(dx * dx + dy * dy + dz * dz), model.repulsion_rest_distance[r],
-                                   model.stiffness, model.repulsion_nonlinearity, model.length_unit)
+        distance = math.sqrt(dx * dx + dy * dy + dz * dz)
+        h, along = _nonlinear_coefficient(distance, model.repulsion_rest_distance[r], model.stiffness,
+                                          model.repulsion_nonlinearity, model.length_unit)
+        # link u = X_i - P_k = X_i - (1 - t) X_a - t X_b (the foot's parameter t held)
+        _set_link(forces.links, springs + r, i, a, b, 1.0, t - 1.0, -t, dx, dy, dz, distance, h, along)
         forces.stiffness[i] += h
         forces.force[i, 0] += h * dx
         forces.force[i, 1] += h * dy

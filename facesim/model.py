@@ -31,6 +31,7 @@ and folded three lip-corner triangles; with √s it settles and folds none.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from pydantic import Field
@@ -47,6 +48,11 @@ from .schema import Strict
 REFERENCE_VERTEX_AREA = 0.5898477858884484
 
 
+#: Steps per frame by default, per solver: the implicit step is stable at one (issue 15's
+#: apex test against the quasi-implicit); the thesis's update needs four on the default face.
+SUBSTEPS = {"implicit": 1, "quasi-implicit": 4}
+
+
 class Material(Strict):
     """Mass-spring-damper parameters (thesis section 3.1.3)."""
 
@@ -57,7 +63,14 @@ class Material(Strict):
     damping: float = Field(40.0, ge=0, description="viscous damping c, eq. 3.10")
     tissue: float = Field(300.0, ge=0, description="hypodermis springs tying skin to bone (not in the thesis, where it is 0)")
     drive: float = Field(20000.0, ge=0, description="stiffness driving the lips and lid contours to the targets of the jaw and eyelids (facesim.rig)")
-    substeps: int = Field(4, ge=1, le=1000, description="integration steps per frame (each Δt / substeps)")
+    solver: Literal["implicit", "quasi-implicit"] = Field(
+        "implicit", description="implicit: the linearised backward-Euler step with the whole stiffness, solved by "
+        "conjugate gradients (facesim.solver); quasi-implicit: the thesis's per-vertex update, eq. 3.14-3.20")
+    substeps: int | None = Field(None, ge=1, le=1000, description="integration steps per frame (each Δt / substeps); "
+                                 "default 1 for the implicit solver, 4 for the quasi-implicit")
+    iterations: int = Field(60, ge=1, le=10000, description="most conjugate-gradient iterations per implicit step")
+    tolerance: float = Field(1e-3, gt=0, lt=1, description="the implicit step's conjugate gradients stop when the "
+                             "residual has fallen by this factor")
     edge_repulsion: bool = Field(True, description="edge repulsion (eq. 3.7); off reproduces the thesis's fig. 3.16")
     uv_projection: bool = Field(True, description="muscle forces in the 2D projection (eq. 3.21-3.25); off: in 3D")
 
@@ -129,9 +142,10 @@ def against_surroundings(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
 def resolved_material(material: Material, resolution: float) -> Material:
     """The material per vertex on a mesh of resolution scale s (module docstring)."""
     s = resolution
+    substeps = material.substeps or SUBSTEPS[material.solver]
     return material.model_copy(update=dict(
         mass=material.mass * s, damping=material.damping * np.sqrt(s), tissue=material.tissue * s, drive=material.drive * s,
-        substeps=max(material.substeps, round(material.substeps / np.sqrt(s))),
+        substeps=max(substeps, round(substeps / np.sqrt(s))),
     ))
 
 
@@ -198,6 +212,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         **{key: float(getattr(resolved, key)) for key in ("mass", "damping", "stiffness", "nonlinearity",
                                                            "repulsion_nonlinearity", "tissue", "drive")},
         length_unit=length_unit, edge_repulsion=bool(resolved.edge_repulsion), uv_projection=bool(resolved.uv_projection),
+        implicit=resolved.solver == "implicit", iterations=int(resolved.iterations), tolerance=float(resolved.tolerance),
     )
 
     from .kernels import _muscle_frame, control

@@ -151,7 +151,7 @@ def run(
     energy_limit = 0.5 * model.material.mass * n * frame_speed**2
     table = np.ascontiguousarray(activations, dtype=np.float64)
     control = kernels.control(model.arrays, np.zeros(table.shape[1]))
-    work, forces = kernels.workspace(n), kernels.forces(n)
+    work, forces = kernels.workspace(n), kernels.forces(model.arrays)
     piece = max(1, int(STEPS_PER_CALL / (model.material.substeps * n)))
     status, frame, element = kernels.OK, -1, -1
     for start in range(0, frames, piece):  # Python between pieces: Ctrl-C and SIGTERM act within about 0.2 s
@@ -208,6 +208,6 @@ def muscle_forces(model: Model, positions: np.ndarray, activation: np.ndarray) -
     ``--show-muscles`` draws, as the thesis's figure 3.10."""
     n = model.vertex_count
     x = np.ascontiguousarray(positions, dtype=np.float64)
-    forces = kernels.forces(n)
+    forces = kernels.forces(model.arrays)
     kernels._muscle_forces(model.arrays, x, kernels.control(model.arrays, activation), kernels.workspace(n), forces)
     return forces.force

@@ -78,11 +78,11 @@ def test_jaw_turns_the_lower_teeth_and_keeps_the_upper(head):
 def test_blink_meets_the_lids_outside_the_eyeballs(head):
     animation = simulate(head_spec("blink"))
     figure = figure_for(animation.model)
-    closed = int(np.argmax(animation.activations[:, animation.muscle_names.index("eyelid_r")]))
-    x = figure.positions(animation.positions[closed])
+    lid = animation.activations[:, animation.muscle_names.index("eyelid_r")]
+    closed = [figure.positions(animation.positions[k]) for k in np.flatnonzero(lid == lid.max())]  # held shut
     for upper, lower in ((159, 145), (386, 374)):
-        gap = x[head.landmarks[upper], 1] - x[head.landmarks[lower], 1]
-        assert gap < 0.05
+        gap = min(x[head.landmarks[upper], 1] - x[head.landmarks[lower], 1] for x in closed)
+        assert gap < 0.05  # the lids meet while the blink holds them shut
     for frame in range(animation.frames):
         x = figure.positions(animation.positions[frame])
         for rows, centre, radius in figure.guards:

@@ -28,7 +28,7 @@ def assert_close(actual, expected, rtol=RTOL):
 def test_springs_match_reference(model, rng, unit):
     x, xp = perturbed(model, rng)
     m = model.material
-    forces = K.forces(len(x))
+    forces = K.forces(model.arrays)
     K._spring_forces(model.arrays._replace(length_unit=unit), xp, forces)
     # the thesis's Σ g (X_i - X_j*) at X = X* is the force at X*
     ref_stiff, ref_force = naive.spring_terms(xp, xp, model.spring_indices, model.spring_rest_length, m.stiffness,
@@ -41,7 +41,7 @@ def test_springs_match_reference(model, rng, unit):
 def test_edge_repulsion_matches_reference(model, rng, zeta):
     x, xp = perturbed(model, rng)
     k0 = model.material.stiffness
-    forces = K.forces(len(x))
+    forces = K.forces(model.arrays)
     K._edge_repulsion_forces(model.arrays._replace(repulsion_nonlinearity=zeta, length_unit=1.0), xp, forces)
     ref_stiff, ref_force = naive.repulsion_terms(xp, xp, model.repulsion_vertex, model.repulsion_edge,
                                                  model.repulsion_rest_distance, k0, zeta)
@@ -50,7 +50,7 @@ def test_edge_repulsion_matches_reference(model, rng, zeta):
 
 
 def test_edge_repulsion_is_zero_at_rest(model):
-    forces = K.forces(model.vertex_count)
+    forces = K.forces(model.arrays)
     K._edge_repulsion_forces(model.arrays, model.rest_position.copy(), forces)
     assert np.abs(forces.force).max() < 1e-9
 
@@ -59,7 +59,7 @@ def test_tissue_matches_reference(model, rng):
     x, target = perturbed(model, rng)
     hold = rng.uniform(0, 1000, len(x)) * (rng.uniform(size=len(x)) > 0.8)
     control = K.control(model.arrays, np.zeros(len(model.muscles.names)))._replace(target=target, hold=hold)
-    forces = K.forces(len(x))
+    forces = K.forces(model.arrays)
     K._tissue_forces(model.arrays._replace(tissue=300.0), x, control, forces)
     ref_stiff, ref_force = naive.tissue_terms(x, target, 300.0, hold)
     assert_close(forces.stiffness, ref_stiff)
@@ -112,7 +112,7 @@ def test_muscle_forces_match_reference(uv, rng):
     x, xp = perturbed(model, rng, scale=0.05)
     activation = rng.uniform(0, 1, model.muscle_count) * (rng.uniform(size=model.muscle_count) > 0.3)
     control = K.control(model.arrays, np.concatenate([activation, np.zeros(len(model.muscles.names) - len(activation))]))
-    forces = K.forces(model.vertex_count)
+    forces = K.forces(model.arrays)
     K._muscle_forces(model.arrays, xp, control, K.workspace(model.vertex_count), forces)
     force = forces.force
     expected = naive.muscle_forces(model, xp, activation)
@@ -193,7 +193,7 @@ def test_step_matches_reference(switches, bones, rng):
     state = K.State(x.copy(), v.copy())
     n = model.vertex_count
     solver._quasi_implicit_step(model.arrays, state, K.control(model.arrays, activation), 0.0025, np.empty_like(x),
-                                K.workspace(n), K.forces(n))
+                                K.workspace(n), K.forces(model.arrays))
     assert_close(state.v, ref_v)
     assert_close(state.x, ref_x)
 
@@ -217,7 +217,7 @@ def test_rig_targets_match_reference(name, rng):
 
 @pytest.mark.parametrize("name", ["happy", "surprise"])  # surprise opens the jaw
 def test_whole_run_matches_reference(name):
-    s = spec(name)
+    s = spec(name, material=material(name, solver="quasi-implicit"))
     model = model_for(s)
     table = activation_table(s, model.muscles)
     positions, *_ = run(model, table, s.dt)
@@ -255,3 +255,76 @@ def test_non_finite_values_are_found_under_fastmath(bad):
     rows[7, 2] = bad
     assert _not_finite(rows) == 7
 
+
+
+def dense_stiffness(links, n):
+    """K (3n, 3n) assembled from the links the terms wrote (kernels.Links), plainly."""
+    k = np.kron(np.diag(links.diagonal), np.eye(3))
+    for node, weight, a, along, across in zip(links.node, links.weight, links.axis, links.along, links.across):
+        block = along * np.outer(a, a) + across * (np.eye(3) - np.outer(a, a))
+        for p in range(3):
+            for q in range(3):
+                k[3 * node[p]:3 * node[p] + 3, 3 * node[q]:3 * node[q] + 3] += weight[p] * weight[q] * block
+    return k
+
+
+def test_links_are_the_jacobian_of_the_springs_and_tissue(model, rng):
+    """Where every spring is stretched (nothing clamped), K p from the links is the
+    derivative of the forces along p: -(F(X + εp) - F(X - εp)) / 2ε."""
+    arrays = model.arrays._replace(edge_repulsion=False)
+    centre = model.rest_position.mean(axis=0)
+    x = centre + 1.08 * (model.rest_position - centre) + 0.002 * rng.standard_normal(model.rest_position.shape)
+    control = K.control(arrays, np.zeros(len(model.muscles.names)))
+    forces = K.forces(arrays)
+
+    def force(at):
+        forces.force[:] = 0.0
+        forces.links.diagonal[:] = 0.0
+        K._spring_forces(arrays, np.ascontiguousarray(at), forces)
+        K._tissue_forces(arrays, np.ascontiguousarray(at), control, forces)
+        return forces.force.copy()
+
+    p = rng.standard_normal(x.shape)
+    eps = 1e-6
+    derivative = -(force(x + eps * p) - force(x - eps * p)) / (2 * eps)
+    force(x)
+    assert (forces.links.across[:len(model.spring_indices)] > 0).all()
+    product = np.empty_like(x)
+    solver._stiffness_product(forces.links, p, product)
+    assert_close(product, derivative, rtol=1e-6)
+    assert_close(product.reshape(-1), dense_stiffness(forces.links, len(x)) @ p.reshape(-1))
+
+
+def test_implicit_step_solves_its_system(rng):
+    """The conjugate gradients reach the solution of (m + Δt C + Δt² K) V' = m V + Δt F +
+    Δt² K V (solver docstring), solved densely from the same terms, at the free vertices."""
+    model = model_for(spec("happy", material=material(tolerance=1e-10, iterations=2000)))
+    x, _ = perturbed(model, rng, scale=0.03)
+    x[model.pinned] = model.rest_position[model.pinned]
+    v = 0.3 * rng.standard_normal(x.shape)
+    v[model.pinned] = 0
+    activation = np.zeros(len(model.muscles.names))
+    activation[:model.muscle_count] = rng.uniform(0.2, 1, model.muscle_count)
+    control = K.control(model.arrays, activation)
+    h, n = 0.01, model.vertex_count
+    state, work, forces = K.State(x.copy(), v.copy()), K.workspace(n), K.forces(model.arrays)
+    krylov = solver.Krylov(*(np.empty_like(x) for _ in range(5)))
+    iterations = solver._implicit_step(model.arrays, state, control, h, np.empty_like(x), work, forces, krylov)
+    assert 1 < iterations < 2000
+
+    # the terms at the same prediction, then the system solved densely
+    xp = np.empty_like(x)
+    solver._predict(model.arrays, K.State(x.copy(), v.copy()), control, h, xp)
+    solver._forces(model.arrays, xp, control, work, forces)
+    free = np.repeat(~model.pinned, 3)
+    m = model.material.mass
+    a = np.diag(np.repeat(m + h * forces.damping, 3)) + h * h * dense_stiffness(forces.links, n)
+    b = m * v.reshape(-1) + h * forces.force.reshape(-1) + h * h * dense_stiffness(forces.links, n) @ v.reshape(-1)
+    expected = np.zeros(3 * n)
+    expected[free] = np.linalg.solve(a[np.ix_(free, free)], b[free])
+    moved = state.x - x - h * state.v  # only the lips' and lids' contacts move positions after the step
+    assert np.abs(moved[~np.isin(np.arange(n), np.r_[model.arrays.contact_upper, model.arrays.contact_lower])]).max() < 1e-12
+    contact = np.isin(np.arange(n), np.r_[model.arrays.contact_upper, model.arrays.contact_lower])
+    keep = np.repeat(~contact, 3) & free
+    assert_close(state.v.reshape(-1)[keep], expected[keep], rtol=1e-6)
+    assert np.abs(state.v[model.pinned]).max() == 0.0
