@@ -21,12 +21,13 @@ occlusion shells the lid vertices nearest them.
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
 
+from . import cache
 from .head import Head
 from .mesh import FaceMesh, smooth_interpolation, unique_edges
 from .render import IRIS, PUPIL, SCLERA, SKIN, _rotation
@@ -168,10 +169,18 @@ def skin_follow(head: Head) -> tuple[np.ndarray, csr_matrix]:
     second). Weights under FOLLOW_TOLERANCE are dropped: 8% of them remain, a frame's
     skin costs 2 ms instead of 11 and moves less than 0.01 mm differently (measured on
     surprise), and no multi-threaded BLAS call competes with the software rasteriser's
-    threads for the two cores."""
-    key = hashlib.sha1(head.neutral.tobytes()).hexdigest()
-    if key in _FOLLOW:
-        return _FOLLOW[key]
+    threads for the two cores. Kept on disk (facesim.cache): a fresh process reads them
+    in about 20 ms."""
+    key = cache.key(head.neutral.tobytes(), head.triangles.tobytes(), head.landmarks.tobytes(), Path(__file__).read_bytes(),
+                    Path(smooth_interpolation.__code__.co_filename).read_bytes())
+    if key not in _FOLLOW:
+        stored = cache.cached_arrays("skin-follow", key, lambda: _skin_follow(head))
+        _FOLLOW[key] = (stored["rows"], csr_matrix((stored["data"], stored["indices"], stored["indptr"]),
+                                                   shape=tuple(stored["shape"])))
+    return _FOLLOW[key]
+
+
+def _skin_follow(head: Head) -> dict[str, np.ndarray]:
     x = head.neutral
     n_face = head.face_count
     face_follow = _face_follow(head)
@@ -198,8 +207,7 @@ def skin_follow(head: Head) -> tuple[np.ndarray, csr_matrix]:
     rows = np.concatenate([np.arange(n_face), socket] + [r for r, _ in bound])
     weights = np.vstack([face_follow, socket_weights[socket]] + [w for _, w in bound])
     weights = csr_matrix(np.where(np.abs(weights) > FOLLOW_TOLERANCE, weights, 0.0))
-    _FOLLOW[key] = (rows, weights)
-    return rows, weights
+    return dict(rows=rows, data=weights.data, indices=weights.indices, indptr=weights.indptr, shape=np.array(weights.shape))
 
 
 def _deep_mouth(head: Head) -> np.ndarray:

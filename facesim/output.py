@@ -100,7 +100,14 @@ def _render_chunk(rest, faces, settings, backend, figure, positions, arrows, pos
 
 def render_frames(animation: Animation, settings: RenderSettings, backend: str = "auto", jobs: int = 1,
                   progress=None, renderer: FaceRenderer | None = None) -> np.ndarray:
-    """All frames of an animation as (frames, height, width, 3) uint8.
+    """All frames of an animation as (frames, height, width, 3) uint8 (``iter_frames``)."""
+    return np.stack(list(iter_frames(animation, settings, backend, jobs, progress, renderer)))
+
+
+def iter_frames(animation: Animation, settings: RenderSettings, backend: str = "auto", jobs: int = 1,
+                progress=None, renderer: FaceRenderer | None = None):
+    """The frames of an animation, (height, width, 3) uint8 each, in order, as they are
+    rendered: a writer encodes one while the next renders (``write_frames``).
 
     With ``jobs`` > 1 the frames are split into contiguous chunks rendered by that many
     processes (started with spawn: an OpenGL context must not be forked), each with its
@@ -112,35 +119,34 @@ def render_frames(animation: Animation, settings: RenderSettings, backend: str =
         own = renderer is None
         renderer = renderer or FaceRenderer.of(animation, settings, backend)
         try:
-            out = []
             for k in range(frames):
-                out.append(renderer.frame(animation, k, None if arrows is None else arrows[k]))
+                yield renderer.frame(animation, k, None if arrows is None else arrows[k])
                 if progress:
                     progress(1)
-            return np.stack(out)
         finally:
             if own:
                 renderer.close()
+        return
     bounds = np.linspace(0, frames, jobs * 2 + 1).astype(int)
     pose = animation.pose
     chunks = [(animation.positions[a:b], None if arrows is None else arrows[a:b], None if pose is None else pose[a:b],
                animation.jaw[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
     fixed = [(animation.rest, animation.faces, settings, backend, animation.figure)] * len(chunks)
     with worker_pool(jobs) as pool:
-        out = []
         for (positions, *_), images in zip(chunks, pool.map(_render_chunk, *zip(*fixed), *zip(*chunks))):
-            out.append(images)
+            yield from images
             if progress:
                 progress(len(positions))
-    return np.concatenate(out)
 
 
-def write_frames(frames: np.ndarray, path: Path, kind: str, fps: float, replace: bool = True) -> None:
+def write_frames(frames, path: Path, kind: str, fps: float, replace: bool = True, count: int | None = None) -> None:
     """Write rendered frames atomically as MP4, GIF or a PNG directory, verified by
-    reading them back (``replace``: whether an existing output may be replaced)."""
+    reading them back (``replace``: whether an existing output may be replaced).
+    ``frames`` is an array or, with their ``count``, any iterable (``iter_frames``): an
+    MP4's encoder then works in its own process on each frame while the next renders."""
     import imageio.v3 as iio
 
-    verify = _verify_frames(kind, len(frames))
+    verify = _verify_frames(kind, len(frames) if count is None else count)
     if kind == "png":
         with atomic_path(path, directory=True, replace=replace, verify=verify) as tmp:
             for k, frame in enumerate(frames):
@@ -150,16 +156,21 @@ def write_frames(frames: np.ndarray, path: Path, kind: str, fps: float, replace:
         if kind == "mp4":
             import imageio_ffmpeg
 
-            height, width = frames.shape[1:3]
+            frames = iter(frames)
+            first = next(frames)
+            height, width = first.shape[:2]
             writer = imageio_ffmpeg.write_frames(
                 str(tmp), (width, height), fps=fps, codec="libx264", pix_fmt_out="yuv420p",
                 output_params=["-crf", "18", "-preset", "veryfast"], macro_block_size=1,
                 ffmpeg_log_level="quiet",  # its failures are found by reading the file back
             )
             writer.send(None)
-            for frame in frames:
-                writer.send(np.ascontiguousarray(frame))
-            writer.close()
+            try:
+                writer.send(np.ascontiguousarray(first))
+                for frame in frames:
+                    writer.send(np.ascontiguousarray(frame))
+            finally:
+                writer.close()
         elif kind == "gif":  # Pillow directly: imageio's plugin flushes again at garbage collection
             from PIL import Image
 
@@ -217,8 +228,8 @@ def write_animation(animation: Animation, path: Path, settings: RenderSettings, 
     if kind == "npz":
         write_npz(animation, path, replace)
     else:
-        frames = render_frames(animation, settings, backend, jobs, progress, renderer)
-        write_frames(frames, path, kind, fps or animation.fps, replace)
+        frames = iter_frames(animation, settings, backend, jobs, progress, renderer)
+        write_frames(frames, path, kind, fps or animation.fps, replace, count=animation.frames)
     return RenderReport(animation.name, path, len(animation.active_muscles), animation.frames, animation.seconds,
                         time.perf_counter() - start)
 

@@ -1,0 +1,55 @@
+"""Derived data kept between processes, as Numba keeps its compiled kernels: arrays that
+take long to compute from the shipped data (the head's skin weights, facesim.figure), in
+``$FACESIM_CACHE``, else ``$XDG_CACHE_HOME/facesim``, else ``~/.cache/facesim``.
+
+An entry's name carries a hash of everything it was computed from, the code included, so
+a changed input or a new facesim version computes a new entry instead of reading a stale
+one. Entries are written under a temporary name and renamed into place; an entry that
+cannot be read is computed again, and a cache that cannot be written is skipped: the
+cache only ever saves time.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import numpy as np
+
+
+def directory() -> Path:
+    if os.environ.get("FACESIM_CACHE"):
+        return Path(os.environ["FACESIM_CACHE"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "facesim"
+
+
+def key(*parts: bytes) -> str:
+    digest = hashlib.sha1()
+    for part in parts:
+        digest.update(hashlib.sha1(part).digest())
+    return digest.hexdigest()
+
+
+def cached_arrays(name: str, digest: str, compute) -> dict[str, np.ndarray]:
+    """The arrays ``compute()`` returns (a dict of name to array), from the cache when an
+    entry ``name``-``digest`` is there and readable, else computed and stored."""
+    path = directory() / f"{name}-{digest}.npz"
+    try:
+        with np.load(path, allow_pickle=False) as stored:
+            return {k: stored[k] for k in stored.files}
+    except Exception:  # absent, truncated or unreadable: computed again below
+        pass
+    arrays = compute()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
+        with open(partial, "wb") as handle:
+            np.savez(handle, **arrays)
+        os.replace(partial, path)
+    except OSError:  # read-only home, full disk: run without the cache
+        try:
+            partial.unlink()
+        except (OSError, UnboundLocalError):
+            pass
+    return arrays

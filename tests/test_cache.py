@@ -1,0 +1,54 @@
+"""The on-disk cache of derived data (facesim.cache): computed once, read back equal,
+recomputed when an entry is damaged, skipped when it cannot be written."""
+
+import os
+
+import numpy as np
+
+from facesim import cache
+
+
+def test_an_entry_is_computed_once_and_read_back(tmp_path, monkeypatch):
+    monkeypatch.setenv("FACESIM_CACHE", str(tmp_path))
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return {"weights": np.arange(12.0).reshape(3, 4), "rows": np.array([4, 5, 6])}
+
+    digest = cache.key(b"inputs", b"code")
+    first = cache.cached_arrays("thing", digest, compute)
+    second = cache.cached_arrays("thing", digest, compute)
+    assert len(calls) == 1
+    for k in first:
+        assert np.array_equal(first[k], second[k]) and first[k].dtype == second[k].dtype
+    assert [p.name for p in tmp_path.iterdir()] == [f"thing-{digest}.npz"]  # no partial file left
+    assert cache.key(b"inputs", b"other code") != digest
+
+    (tmp_path / f"thing-{digest}.npz").write_bytes(b"PK\x03\x04 truncated")
+    assert np.array_equal(cache.cached_arrays("thing", digest, compute)["rows"], [4, 5, 6])
+    assert len(calls) == 2
+
+
+def test_an_unwritable_cache_only_costs_time(tmp_path, monkeypatch):
+    blocked = tmp_path / "file"
+    blocked.write_text("not a directory")
+    monkeypatch.setenv("FACESIM_CACHE", str(blocked / "facesim"))
+    arrays = cache.cached_arrays("thing", "0", lambda: {"a": np.ones(3)})
+    assert np.array_equal(arrays["a"], np.ones(3)) and blocked.read_text() == "not a directory"
+
+
+def test_the_heads_skin_weights_read_from_the_cache_are_the_computed_ones(tmp_path, monkeypatch):
+    from facesim import figure
+    from facesim.config import HEAD
+    from facesim.head import load_head
+
+    monkeypatch.setenv("FACESIM_CACHE", str(tmp_path))
+    monkeypatch.setattr(figure, "_FOLLOW", {})
+    head = load_head(HEAD)
+    rows, weights = figure.skin_follow(head)  # computed and stored
+    assert len(os.listdir(tmp_path)) == 1
+    monkeypatch.setattr(figure, "_FOLLOW", {})
+    again_rows, again = figure.skin_follow(head)  # read
+    assert np.array_equal(rows, again_rows) and (weights != again).nnz == 0
+    assert weights.shape == (len(rows), len(head.landmarks)) and weights.nnz > 0
