@@ -471,35 +471,49 @@ def head(sizes: list[int], repeats: int) -> tuple[str, dict]:
 
 ANALYSIS = """### Where the missed targets stand, and what would close them
 
-- **Simulation, 2 ms for happy.** A step of the 468-vertex face costs about 130-180 µs:
-  1,320 springs and 2,556 edge-repulsion pairs at about 15 ns each (a square root, a
-  division and the (1 + s²)^5 factor per pair, scalar code), the projection's atan2 per
-  vertex, the flood fills and back-projections of the active muscles. The step count is
-  the other factor: each frame needs 4 sub-steps (140 steps for 35 frames). With one
-  sub-step the explicit coupling of a vertex to its neighbours and to the edge-repulsion
-  reactions diverges within 8 frames (measured; two sub-steps ring without settling). What
-  would close the gap: a solver that is stable at one step per frame (a few conjugate-
-  gradient iterations on the linearised implicit system instead of the per-vertex solve),
-  then vectorised structure-of-arrays kernels (float32, 4-8 pairs per instruction).
-- **10 million vertex-steps per second per core at 28k vertices.** About 2 million now,
-  the same per-pair cost as above. The cost per vertex-step grows by about 70% from 468 to
-  110k vertices instead of staying flat: the working set (positions, predictions, forces,
-  neighbour lists, about 200 bytes per vertex) leaves the L2 cache above about 10k
-  vertices, and the springs and repulsion pairs gather their neighbours at random. A
-  vertex ordering along a space-filling curve and the vectorised kernels would close most
-  of it; `prange` over the two cores was not added, since the simulation is already a
-  small share of a rendered frame.
-- **25 frames per second end to end at 512².** Rendering is the cost, not simulation:
-  Mesa's software rasteriser (llvmpipe, which already uses both cores) needs about 45 ms
-  per antialiased 512² frame, most of it the 4x multisampled resolve that pyrender hard-
-  codes. Without antialiasing (`--no-antialias`) the target is met. Rendering frames in
-  two processes is slower, not faster: llvmpipe's threads already occupy both cores and
-  each process pays for its own imports and context.
-- **3 s for `facesim render` in a fresh process.** Importing facesim and Numba (about
-  0.5 s), pyrender with trimesh and scipy (about 1.2 s), loading the cached kernels (about
-  0.5 s), then 35 frames at 45 ms and the encode. Closing it would take trimming pyrender's
-  import (it imports trimesh for its mesh helpers), `--no-antialias`, or a long-lived
-  render server that keeps the context and the imports warm between renders.
+Profiles measured inside Numba (each kernel looped in compiled code, so no call overhead),
+on happy's 468-vertex face at frame 12:
+
+| per step | µs |
+|---|---|
+| all force terms (`solver._forces`) | 101 |
+| - edge repulsion, 2,556 pairs (eq. 3.7) | 49 |
+| - muscles: projection, flood fills, back-projection (eq. 3.1-3.4, 3.21-3.25) | 29 |
+| - springs, 1,320 (eq. 3.6) | 16 |
+| - hypodermis and rig drive | 1 |
+| implicit step: Jacobi preconditioner | 25 |
+| implicit step: one conjugate-gradient iteration (K p over 3,876 links, 3 dot products) | 32 |
+| implicit step: iterations to a residual 1e-3 of the first | 6-9 |
+
+- **Simulation, 2 ms for happy on the Hopper face.** The implicit solver takes one step
+  per frame where the thesis's update takes four, but its step costs about 3.5 of theirs:
+  the forces (101 µs) plus the preconditioner and about 8 iterations of a product as
+  costly as the springs and repulsion together. Per pair the kernels are scalar code at
+  about 6-19 ns (a square root, two divisions, the (1 + s²)^γ factor and a scatter to
+  three vertices). What would close it: links whose block is written once per step in
+  structure-of-arrays form and applied by a vectorised product (float32, 8 lanes), a
+  block-Jacobi preconditioner to halve the iterations, and the muscles' flood fills cached
+  between steps (their regions barely change within a frame).
+- **10 million vertex-steps per second per core at 28k vertices; `prange` 1.7x.** About
+  4 million (the thesis's step, Loop-subdivided face): the per-pair cost above, plus cache
+  misses once the working set (about 200 bytes per vertex) leaves the L2 cache above 10k
+  vertices. `prange` was not built: the simulated mesh of every face facesim renders is
+  468 vertices, where a parallel region's start (several µs, about ten per step) costs
+  more than it saves, and during a render Mesa's llvmpipe already runs on both cores.
+  What would close it for large meshes: a vertex order along a space-filling curve
+  (scipy's reverse Cuthill-McKee) and per-thread force buffers over the springs and pairs.
+- **25 frames per second end to end on the head at 512², antialiased.** Rendering is the
+  cost: 26,719 vertices in nine materials through pyrender's PBR shader in Mesa's
+  software rasteriser. Any multisampled framebuffer costs about 108 ms a frame (2 or 4
+  samples alike); facesim now supersamples (1024², one sample, averaged: about 90 ms), and
+  without antialiasing a frame is about 35 ms. Simulation (0.3 ms a frame) and encoding
+  (overlapped) are small. What would close it: a GPU, or a lighter shader (one light,
+  no PBR) and drawing only the parts in view.
+- **3 s for `facesim render` in a fresh process.** About 1 s of imports (facesim, Numba,
+  pyrender, trimesh, scipy), 0.5 s to load the head and check it, 0.3 s for the GL
+  context, then 35 frames at about 90 ms. The head's skin weights (1.2 s to solve) are
+  now read from an on-disk cache in 0.1 s. What would close it: the frame cost above, or
+  a long-lived render server keeping the imports and the context warm.
 """
 
 
