@@ -53,8 +53,10 @@ def why_short(tmp: Path) -> str:
     return f": no space left on device ({free // 1024} KB free)" if free < FULL_DISK else ""
 
 
-def _verify_frames(kind: str, count: int):
-    """A check that a written output reads back with all ``count`` frames."""
+def _verify_frames(kind: str, count: int, fps: float):
+    """A check that a written output reads back with all ``count`` frames. A GIF holds a
+    run of identical frames as one frame shown that much longer (Pillow merges them), so
+    its frames are counted by their durations."""
 
     def verify(tmp: Path) -> None:
         try:
@@ -65,8 +67,11 @@ def _verify_frames(kind: str, count: int):
             elif kind == "gif":
                 from PIL import Image
 
+                found = 0
                 with Image.open(tmp) as image:
-                    found = image.n_frames
+                    for k in range(image.n_frames):
+                        image.seek(k)
+                        found += max(1, round(image.info.get("duration", 1000.0 / fps) * fps / 1000.0))
             else:
                 from PIL import Image
 
@@ -146,7 +151,7 @@ def write_frames(frames, path: Path, kind: str, fps: float, replace: bool = True
     MP4's encoder then works in its own process on each frame while the next renders."""
     import imageio.v3 as iio
 
-    verify = _verify_frames(kind, len(frames) if count is None else count)
+    verify = _verify_frames(kind, len(frames) if count is None else count, fps)
     if kind == "png":
         with atomic_path(path, directory=True, replace=replace, verify=verify) as tmp:
             for k, frame in enumerate(frames):

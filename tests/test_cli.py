@@ -103,6 +103,17 @@ def test_gif_npz_fps_size_and_cameras(tmp_path):
     assert np.abs(views["front"] - views["front"][:, ::-1]).mean() < np.abs(views["profile"] - views["profile"][:, ::-1]).mean()
 
 
+def test_a_still_face_writes_a_gif_of_every_frame(tmp_path):
+    """Pillow stores a run of identical frames as one longer frame: a face at rest is a
+    GIF of one frame that lasts the whole animation, and it is not refused as short."""
+    spec = tmp_path / "still.yaml"
+    spec.write_text("name: still\nframes: 9\nactivations: {}\n")
+    facesim("render", spec, "-o", tmp_path / "still.gif", "--size", "48x48", "--fps", "30", check=0)
+    durations = [iio.immeta(tmp_path / "still.gif", index=k)["duration"]
+                 for k in range(len(iio.imread(tmp_path / "still.gif", index=None)))]
+    assert abs(sum(durations) - 9 * 1000 / 30) <= 10 * len(durations)  # GIF keeps centiseconds
+
+
 def test_wireframe_show_muscles_and_parallel_frames(tmp_path):
     spec = write_spec(tmp_path)
     plain = tmp_path / "plain"
