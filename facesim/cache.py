@@ -11,6 +11,7 @@ cache only ever saves time.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 from pathlib import Path
@@ -41,15 +42,13 @@ def cached_arrays(name: str, digest: str, compute) -> dict[str, np.ndarray]:
     except Exception:  # absent, truncated or unreadable: computed again below
         pass
     arrays = compute()
+    partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
         with open(partial, "wb") as handle:
             np.savez(handle, **arrays)
         os.replace(partial, path)
     except OSError:  # read-only home, full disk: run without the cache
-        try:
+        with contextlib.suppress(OSError):  # no partial file, or no directory to hold one
             partial.unlink()
-        except (OSError, UnboundLocalError):
-            pass
     return arrays

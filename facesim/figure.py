@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
 
-from . import cache
+from . import cache, mesh
 from .head import Head
 from .mesh import FaceMesh, smooth_interpolation, unique_edges
 from .render import IRIS, PUPIL, SCLERA, SKIN, _rotation
@@ -172,7 +172,7 @@ def skin_follow(head: Head) -> tuple[np.ndarray, csr_matrix]:
     threads for the two cores. Kept on disk (facesim.cache): a fresh process reads them
     in about 20 ms."""
     key = cache.key(head.neutral.tobytes(), head.triangles.tobytes(), head.landmarks.tobytes(), Path(__file__).read_bytes(),
-                    Path(smooth_interpolation.__code__.co_filename).read_bytes())
+                    Path(mesh.__file__).read_bytes())
     if key not in _FOLLOW:
         stored = cache.cached_arrays("skin-follow", key, lambda: _skin_follow(head))
         _FOLLOW[key] = (stored["rows"], csr_matrix((stored["data"], stored["indices"], stored["indptr"]),

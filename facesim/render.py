@@ -115,9 +115,10 @@ def _single_sample(renderer) -> None:
     """Make a pyrender Renderer draw without its fixed 4x multisampling. pyrender
     hard-codes the sample count, so the call that allocates the framebuffer is wrapped
     for this renderer only. Mesa's software rasteriser pays for a multisampled
-    framebuffer at any sample count (measured on the head at 512²: 108 ms a frame with 2
-    or 4 samples, 40 ms with none, 65 ms for one sample at 1024²), so antialiasing is
-    done by supersampling instead (``SUPERSAMPLE``, ``_downsample``)."""
+    framebuffer at any sample count (measured on the head at 512², side by side: 108 ms a
+    frame with 2 or 4 samples, 35 ms with none, 91 ms for one sample at 1024² averaged
+    down), so antialiasing is done by supersampling instead (``SUPERSAMPLE``,
+    ``_downsample``)."""
     import pyrender.renderer as module
 
     configure = renderer._configure_main_framebuffer
@@ -252,7 +253,6 @@ class FaceRenderer:
         lines = settings.wireframe or settings.show_muscles
         supersample = settings.antialias and not lines and max(settings.width, settings.height) <= SUPERSAMPLE_LIMIT
         self._factor = SUPERSAMPLE if supersample else 1
-        self._image = np.empty((settings.height, settings.width, 3), dtype=np.uint8)
         try:
             self._renderer = pyrender.OffscreenRenderer(self._factor * settings.width, self._factor * settings.height)
         except Exception as exc:
@@ -364,8 +364,9 @@ class FaceRenderer:
         colour, _ = self._renderer.render(self._scene, flags=self._flags)
         if self._factor == 1:
             return colour
-        _downsample(colour, self._factor, self._image)
-        return self._image.copy()
+        image = np.empty((self.settings.height, self.settings.width, 3), dtype=np.uint8)
+        _downsample(colour, self._factor, image)
+        return image
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """(k, 2) pixel coordinates (x right, y down) where points (k, 3) of the head at

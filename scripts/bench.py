@@ -35,6 +35,7 @@ from facesim.muscles import MuscleFile, muscles_as_points, resolve_muscles  # no
 from facesim.schema import load_model  # noqa: E402
 from facesim.simulate import model_for, run  # noqa: E402
 from facesim.spec import activation_table  # noqa: E402
+from conftest import held_apex  # noqa: E402  (tests/: the solvers' comparison the tests make)
 
 EXPRESSIONS = ROOT / "expressions"
 #: The thesis's tables run on the Hopper face (468 vertices, the scale of its 612-node
@@ -192,15 +193,6 @@ def table_33(repeats: int) -> str:
 
 # --- side by side: the two solvers, Numba against NumPy, compilation -----------------
 
-def held_apex(spec, hold: int = 200):
-    """The face at the apex of a spec, held ``hold`` frames: the mean of the last 50."""
-    model = model_for(spec)
-    table_ = activation_table(spec, model.muscles)
-    apex = int(np.argmax(np.abs(table_).sum(axis=1)))
-    held = np.vstack([table_[:apex + 1], np.repeat(table_[apex:apex + 1], hold, axis=0)])
-    return model, run(model, held, spec.dt)[0][-50:].mean(axis=0)
-
-
 def solvers(repeats: int, names: list[str]) -> tuple[str, dict]:
     """happy on the Hopper face and on the head by each solver, and how far apart the
     held apexes of the thesis's expressions are."""
@@ -222,8 +214,8 @@ def solvers(repeats: int, names: list[str]) -> tuple[str, dict]:
     for face, on in (("the default head", {}), ("the Hopper face", dict(mesh=HOPPER_MESH))):
         apart = {}
         for name in names:
-            model, reference = held_apex(solved_by(name, "quasi-implicit", **on))
-            _, implicit = held_apex(solved_by(name, "implicit", **on))
+            model, reference, _ = held_apex(solved_by(name, "quasi-implicit", **on))
+            _, implicit, _ = held_apex(solved_by(name, "implicit", **on))
             largest = np.linalg.norm(reference - model.rest_position, axis=1).max()
             apart[name] = float(np.linalg.norm(implicit - reference, axis=1).max() / largest)
         figures[f"apex, {face}"] = apart

@@ -12,7 +12,8 @@ import facesim
 from facesim.config import DEFAULT_MESH, DEFAULT_MUSCLES
 from facesim.mesh import load_mesh
 from facesim.muscles import load_muscles
-from facesim.simulate import model_for
+from facesim.simulate import model_for, run
+from facesim.spec import activation_table
 
 ROOT = Path(__file__).resolve().parent.parent
 EXPRESSIONS = ROOT / "expressions"
@@ -58,6 +59,19 @@ def material(name: str = "happy", **changes):
     """A spec's material with fields replaced."""
     s = spec(name)
     return s.material.model_copy(update=changes)
+
+
+def held_apex(s, hold: int = 200):
+    """A spec's face at its apex (its strongest frame), held ``hold`` frames: the model,
+    the mean positions of the last 50 frames (disgust's lips keep a 0.15 mm tremor at
+    their contact) and the most inverted triangles in any frame. Used by tests/test_solver.py
+    and by scripts/bench.py to compare the solvers."""
+    model = model_for(s)
+    table = activation_table(s, model.muscles)
+    apex = int(np.argmax(np.abs(table).sum(axis=1)))
+    held = np.vstack([table[:apex + 1], np.repeat(table[apex:apex + 1], hold, axis=0)])
+    positions, _, inverted, _ = run(model, held, s.dt, stop_on_inversion=False)
+    return model, positions[-50:].mean(axis=0), int(inverted.max())
 
 
 @pytest.fixture(scope="session")

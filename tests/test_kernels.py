@@ -322,9 +322,9 @@ def test_implicit_step_solves_its_system(rng):
     b = m * v.reshape(-1) + h * forces.force.reshape(-1) + h * h * dense_stiffness(forces.links, n) @ v.reshape(-1)
     expected = np.zeros(3 * n)
     expected[free] = np.linalg.solve(a[np.ix_(free, free)], b[free])
-    moved = state.x - x - h * state.v  # only the lips' and lids' contacts move positions after the step
-    assert np.abs(moved[~np.isin(np.arange(n), np.r_[model.arrays.contact_upper, model.arrays.contact_lower])]).max() < 1e-12
     contact = np.isin(np.arange(n), np.r_[model.arrays.contact_upper, model.arrays.contact_lower])
+    moved = state.x - x - h * state.v  # only the lips' and lids' contacts move positions after the step
+    assert np.abs(moved[~contact]).max() < 1e-12
     keep = np.repeat(~contact, 3) & free
     assert_close(state.v.reshape(-1)[keep], expected[keep], rtol=1e-6)
     assert np.abs(state.v[model.pinned]).max() == 0.0
