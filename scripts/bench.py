@@ -135,12 +135,12 @@ import json, os, sys, time, statistics
 import numpy as np, facesim
 from facesim.render import FaceRenderer, RenderSettings
 from facesim.output import write_frames
-names, size, repeats, backend, antialias = {names!r}, {size}, {repeats}, {backend!r}, {antialias!r}
+names, size, repeats, backend = {names!r}, {size}, {repeats}, {backend!r}
 out = {{}}
 renderer = None
 for name in names:
     a = facesim.simulate(facesim.load_spec(f"expressions/{{name}}.yaml"){face})
-    renderer = renderer or FaceRenderer(a.rest, a.faces, RenderSettings(size, size, antialias=antialias), backend)
+    renderer = renderer or FaceRenderer(a.rest, a.faces, RenderSettings(size, size), backend)
     renderer.render(a.positions[0])
     render, encode = [], []
     for _ in range(repeats):
@@ -153,7 +153,7 @@ print(json.dumps(out))
 
 def table_31(repeats: int, size: int, render_repeats: int) -> tuple[str, dict]:
     names = list(THESIS_31)
-    render = python_json(RENDER_CODE.format(names=names, size=size, repeats=render_repeats, backend="auto", antialias=True,
+    render = python_json(RENDER_CODE.format(names=names, size=size, repeats=render_repeats, backend="auto",
                                             face=THESIS_FACE))
     rows, figures = [], {}
     for name in names:
