@@ -351,9 +351,7 @@ class FaceRenderer:
         else:
             self.pose(*pose[:3])
             scene = self._figure.positions(positions, jaw, tuple(pose[3:5]))
-            _vertex_normals(scene, self._faces, self._normals)
-            for primitive, rows in self._parts:
-                self._upload(primitive, np.hstack([scene[rows], self._normals[rows], self._figure.colour[rows]]).astype(np.float32))
+            self._draw_figure(scene)
             positions = scene[self._figure.anchor]
             if self._wire is not None:  # a hair in front of the skin, toward the camera
                 self._upload(self._wire, (positions[self._edges.ravel()] + self._toward_camera).astype(np.float32))
@@ -361,6 +359,24 @@ class FaceRenderer:
             vectors = np.zeros_like(positions) if arrows is None else arrows
             lines = np.stack([positions, positions + vectors], axis=1).reshape(-1, 3).astype(np.float32)
             self._upload(self._arrows, lines)
+        return self._finish()
+
+    def render_figure(self, scene: np.ndarray, pose=None) -> np.ndarray:
+        """One frame of a head given every vertex of its figure (N, 3) rather than its
+        simulation mesh: a scanned shape drawn with the same camera and lights
+        (``scripts/realism.py``'s atlas). Returns (height, width, 3) uint8."""
+        pose = np.zeros(3) if pose is None else np.asarray(pose, dtype=np.float64)
+        self._renderer._platform.make_current()
+        self.pose(*pose[:3])
+        self._draw_figure(np.ascontiguousarray(scene, dtype=np.float64))
+        return self._finish()
+
+    def _draw_figure(self, scene: np.ndarray) -> None:
+        _vertex_normals(scene, self._faces, self._normals)
+        for primitive, rows in self._parts:
+            self._upload(primitive, np.hstack([scene[rows], self._normals[rows], self._figure.colour[rows]]).astype(np.float32))
+
+    def _finish(self) -> np.ndarray:
         colour, _ = self._renderer.render(self._scene, flags=self._flags)
         if self._factor == 1:
             return colour

@@ -1,0 +1,115 @@
+"""How far an action unit of facesim is from a scanned one (issue 16): the measurement
+the muscles are calibrated by.
+
+ICT FaceKit (USC ICT, MIT licence) publishes, for each FACS action unit of its table, the
+light-stage shapes a real face takes under it. facesim never moves toward them: they are
+measurements. An action unit is simulated alone at full intensity (eased in over
+``ONSET`` frames and held to ``FRAMES``), and its displacement from the neutral at the
+last frame is compared with ICT's, vertex for vertex, over the vertices that either moves
+at least ``MOVES``:
+
+- direction: the cosine between the two displacement fields;
+- amplitude: the ratio of their norms; and the ratio of the mean displacement at the
+  ``TOP`` vertices ICT moves most (the peak).
+
+On the default head the simulated vertices are MediaPipe's landmarks, vertex k lying on
+ICT's vertex ``Head.landmarks[k]``, so ICT's displacement at those vertices is all the
+comparison needs (``landmark_displacements`` keeps them, a few kB per unit, as
+``tests/data/ict_action_units.npz``). The whole face area, which follows the landmarks
+(facesim.figure), is compared by ``scripts/realism.py`` against ICT's full shapes: ICT's
+own displacement carried through the same follow has cosine at least 0.95 with its full
+shape for every unit here, so the landmarks lose little.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: ICT's FACS table (ICT FaceKit's README): action unit -> its shapes, summed. AU26 (jaw
+#: drop) is half of jawOpen, AU27 (mouth stretch) all of it.
+ICT_SHAPES = {
+    "AU1": ["browInnerUp_L", "browInnerUp_R"], "AU2": ["browOuterUp_L", "browOuterUp_R"],
+    "AU4": ["browDown_L", "browDown_R"], "AU5": ["eyeWide_L", "eyeWide_R"],
+    "AU6": ["cheekSquint_L", "cheekSquint_R"], "AU7": ["eyeSquint_L", "eyeSquint_R"],
+    "AU9": ["noseSneer_L", "noseSneer_R"], "AU10": ["mouthShrugUpper"],
+    "AU11": ["mouthUpperUp_L", "mouthUpperUp_R"], "AU12": ["mouthSmile_L", "mouthSmile_R"],
+    "AU14": ["mouthDimple_L", "mouthDimple_R"], "AU15": ["mouthFrown_L", "mouthFrown_R"],
+    "AU16": ["mouthLowerDown_L", "mouthLowerDown_R"], "AU17": ["mouthShrugLower"], "AU18": ["mouthPucker"],
+    "AU20": ["mouthStretch_L", "mouthStretch_R"], "AU22": ["mouthFunnel"], "AU24": ["mouthPress_L", "mouthPress_R"],
+    "AU26": ["jawOpen"], "AU27": ["jawOpen"], "AU45": ["eyeBlink_L", "eyeBlink_R"],
+}
+ICT_WEIGHT = {"AU26": 0.5}
+#: ICT's face area: its vertices 0-9408.
+FACE_AREA = 9409
+#: A vertex takes part in the comparison when either field moves it this far (cm).
+MOVES = 0.1
+#: The peak amplitude is taken at the vertices ICT moves most, this many.
+TOP = 20
+#: Issue 16's bounds: cosine at least COSINE, amplitude (the norm ratio) within AMPLITUDE.
+COSINE, AMPLITUDE = 0.8, (0.75, 1.33)
+#: The simulation of one unit: frames, and the frames it is eased in over.
+FRAMES, ONSET = 80, 10
+
+
+@dataclass(frozen=True)
+class Comparison:
+    cosine: float
+    amplitude: float
+    peak: float  # ratio of the mean displacement at the TOP vertices ICT moves most
+    ours_peak: float  # cm
+    their_peak: float  # cm
+
+    @property
+    def within_bounds(self) -> bool:
+        return self.cosine >= COSINE and AMPLITUDE[0] <= self.amplitude <= AMPLITUDE[1]
+
+
+def ict_displacement(shapes, au: str) -> np.ndarray:
+    """(N, 3) ICT's displacement for ``au`` over its whole head, from ``shapes.npz``
+    (``expression_names``, ``expression_deltas``)."""
+    names = list(shapes["expression_names"])
+    deltas = shapes["expression_deltas"]
+    total = sum(deltas[names.index(n)].astype(np.float64) for n in ICT_SHAPES[au])
+    return ICT_WEIGHT.get(au, 1.0) * total
+
+
+def compare(ours: np.ndarray, theirs: np.ndarray) -> Comparison:
+    """Direction and amplitude of displacement field ``ours`` (k, 3) against ``theirs``."""
+    either = (np.linalg.norm(ours, axis=1) >= MOVES) | (np.linalg.norm(theirs, axis=1) >= MOVES)
+    a, b = ours[either].ravel(), theirs[either].ravel()
+    top = np.argsort(np.linalg.norm(theirs, axis=1))[-TOP:]
+    ours_peak = float(np.linalg.norm(ours[top], axis=1).mean())
+    their_peak = float(np.linalg.norm(theirs[top], axis=1).mean())
+    return Comparison(
+        cosine=float(a @ b / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-12)),
+        amplitude=float(np.linalg.norm(a) / max(np.linalg.norm(b), 1e-12)),
+        peak=ours_peak / max(their_peak, 1e-12), ours_peak=ours_peak, their_peak=their_peak,
+    )
+
+
+@dataclass(frozen=True)
+class Held:
+    """An action unit simulated and held: the simulated vertices' displacement at the
+    last frame (n, 3), as the head shows it (a lid landmark's motion scaled to the head's
+    own opening, facesim.figure); the most inverted triangles in any frame; and the
+    kinetic energy at the end over its peak (how far from settled)."""
+
+    displacement: np.ndarray
+    inverted: int
+    unsettled: float
+
+
+def hold(model, au: str, intensity: float = 1.0, frames: int = FRAMES) -> Held:
+    """Simulate ``au`` alone on ``model`` (facesim.model.Model), eased in and held."""
+    from .simulate import figure_for, run
+    from .spec import Spec, activation_table
+
+    spec = Spec.model_validate(dict(name=au, frames=frames, onset=ONSET, aus={au: intensity}))
+    positions, energy, inverted, _ = run(model, activation_table(spec, model.muscles), spec.dt, stop_on_inversion=False)
+    displacement = positions[-1] - model.rest_position
+    figure = figure_for(model)
+    if figure is not None:
+        displacement = displacement * figure.follow_gain[:, None]
+    return Held(displacement, int(inverted.max()), float(energy[-1] / max(energy.max(), 1e-300)))

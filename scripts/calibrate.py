@@ -1,0 +1,183 @@
+"""Calibrate the default head's muscles against ICT FaceKit's scanned FACS shapes (issue 16).
+
+For each action unit, the muscles it drives (facesim.timeline.ACTION_UNITS) have their
+force f (eq. 3.1), angular zone α (eq. 3.2) and radial falloff r, r_max (eq. 3.3)
+searched by Nelder-Mead, left and right together, so that the unit simulated alone at
+full intensity (facesim.calibration.hold) matches ICT's displacement at the simulated
+vertices (``tests/data/ict_action_units.npz``) in direction and amplitude, with no
+inverted triangle and settling. The loss is
+
+    (1 - cosine) + ½ ln(amplitude)² + ⅒ inverted + ⅒ max(0, log10(unsettled / 1e-3)),
+
+and the best parameters found are written into ``meshes/ict/head.muscles.yaml`` (with
+``--write``). ICT's shapes are the measurement the parameters are chosen by; the motion
+is the muscles', the skin's and the rig's. ``scripts/build_ict_head.py`` writes the
+head's muscle file from the Hopper face's: run this after it.
+
+Usage: ``python scripts/calibrate.py [AU ...] [--evaluations N] [--write]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import math
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+from scipy.optimize import minimize
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from facesim.calibration import compare, hold  # noqa: E402
+from facesim.config import HEAD, HEAD_MUSCLES  # noqa: E402
+from facesim.mesh import load_face  # noqa: E402
+from facesim.model import Material, build_model  # noqa: E402
+from facesim.muscles import MuscleFile, resolve_muscles  # noqa: E402
+from facesim.timeline import ACTION_UNITS  # noqa: E402
+
+DATA = ROOT / "tests" / "data" / "ict_action_units.npz"
+#: Search bounds: force, zone (degrees), r and r_max / r (in muscle lengths or ring radii).
+BOUNDS = {"force": (10.0, 40000.0), "zone": (5.0, 120.0), "r": (0.2, 3.0), "spread": (1.02, 4.0)}
+
+
+class Calibration:
+    """The head, its muscle file as a dict, and ICT's displacements at its landmarks."""
+
+    def __init__(self, material: Material = Material()):
+        self.mesh = load_face(HEAD)
+        self.raw = yaml.safe_load(HEAD_MUSCLES.read_text())
+        self.defaults = self.raw.get("defaults", {})
+        data = np.load(DATA)
+        self.ict = {str(au): d.astype(np.float64) for au, d in zip(data["action_units"], data["displacement"])}
+        self.material = material
+
+    def entries(self, au: str) -> list[list[dict]]:
+        """The muscle file's entries an action unit drives, grouped by muscle (left and
+        right together)."""
+        groups = []
+        for muscle in ACTION_UNITS[au][1]:
+            found = [m for m in self.raw["muscles"] if m["name"] == muscle or m["name"] in (f"{muscle}_l", f"{muscle}_r")]
+            if found:
+                groups.append(found)
+        return groups
+
+    def parameters(self, au: str) -> np.ndarray:
+        """The unit's muscles' parameters, in the search's coordinates (logs of force, zone,
+        r and r_max / r; a sphincter has no zone)."""
+        values = []
+        for group in self.entries(au):
+            m = group[0]
+            r, r_max = m.get("falloff", self.defaults.get("falloff", [1.0, 1.5]))
+            values += [math.log(m.get("force", self.defaults.get("force", 30.0))), math.log(r), math.log(r_max / r)]
+            if m["kind"] == "linear":
+                values.append(math.log(m.get("zone", self.defaults.get("zone", 40.0))))
+        return np.array(values)
+
+    def with_parameters(self, au: str, values: np.ndarray) -> dict:
+        raw = copy.deepcopy(self.raw)
+        by_name = {m["name"]: m for m in raw["muscles"]}
+        k = 0
+        for group in self.entries(au):
+            linear = group[0]["kind"] == "linear"
+            count = 4 if linear else 3
+            force, r, spread, *zone = [float(np.exp(v)) for v in values[k:k + count]]
+            k += count
+            force, r, spread = (float(np.clip(v, *BOUNDS[b])) for v, b in ((force, "force"), (r, "r"), (spread, "spread")))
+            for m in group:
+                entry = by_name[m["name"]]
+                entry["force"] = round(force, 1)
+                entry["falloff"] = [round(r, 3), round(r * spread, 3)]
+                if linear:
+                    entry["zone"] = round(float(np.clip(zone[0], *BOUNDS["zone"])), 1)
+        return raw
+
+    def measure(self, raw: dict, au: str):
+        model = build_model(self.mesh, resolve_muscles(MuscleFile.model_validate(raw), self.mesh), self.material)
+        held = hold(model, au)
+        return compare(held.displacement, self.ict[au]), held
+
+    def loss(self, raw: dict, au: str) -> float:
+        try:
+            c, held = self.measure(raw, au)
+        except Exception:  # a simulation that blows up is the worst outcome, not a stop
+            return 10.0
+        return ((1.0 - c.cosine) + 0.5 * math.log(max(c.amplitude, 1e-6)) ** 2 + 0.1 * held.inverted
+                + 0.1 * max(0.0, math.log10(max(held.unsettled, 1e-12) / 1e-3)))
+
+    def calibrate(self, au: str, evaluations: int) -> float:
+        start = self.parameters(au)
+        if not len(start):
+            return float("nan")
+        result = minimize(lambda v: self.loss(self.with_parameters(au, v), au), start, method="Nelder-Mead",
+                          options=dict(maxfev=evaluations, initial_simplex=start + np.vstack([np.zeros(len(start)), 0.4 * np.eye(len(start))]),
+                                       xatol=1e-3, fatol=1e-4))
+        best = self.with_parameters(au, result.x)
+        if self.loss(best, au) < self.loss(self.raw, au):
+            self.raw = best
+        return self.loss(self.raw, au)
+
+    def write(self, path: Path = HEAD_MUSCLES) -> None:
+        """The calibrated parameters into the muscle file, in place: each muscle's force,
+        zone and falloff on its own line or block, comments kept."""
+        lines = path.read_text().splitlines()
+        for m in self.raw["muscles"]:
+            for i, line in enumerate(lines):
+                if re.match(rf"\s*- \{{name: {m['name']},", line):
+                    line = _set_flow(line, "zone", m.get("zone"))
+                    line = _set_flow(line, "falloff", m.get("falloff"))
+                    lines[i] = _set_flow(line, "force", m.get("force"))
+                elif re.match(rf"\s*- name: {m['name']}(\s|$)", line):
+                    j = i + 1
+                    while j < len(lines) and not re.match(r"\s*- |\S", lines[j]):
+                        for key in ("falloff", "force"):
+                            if re.match(rf"\s*{key}:", lines[j]):
+                                lines[j] = re.sub(rf"({key}:\s*).*", lambda g: g.group(1) + _flow(m[key]), lines[j])
+                        j += 1
+        path.write_text("\n".join(lines) + "\n")
+
+
+def _flow(value) -> str:
+    return "[" + ", ".join(_flow(v) for v in value) + "]" if isinstance(value, list) else f"{value:g}"
+
+
+def _set_flow(line: str, key: str, value) -> str:
+    """Set ``key: value`` in a one-line flow mapping, adding it before the closing brace."""
+    if value is None:
+        return line
+    text = f"{key}: {_flow(value)}"
+    pattern = rf"{key}: (\[[^\]]*\]|[^,}}]+)"
+    if re.search(pattern, line):
+        return re.sub(pattern, text, line, count=1)
+    return re.sub(r"\}", f", {text}}}", line, count=1)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("units", nargs="*", help="action units to calibrate (default: every unit with a muscle of its own)")
+    parser.add_argument("--evaluations", type=int, default=200, help="simulations per unit")
+    parser.add_argument("--write", action="store_true", help=f"write the parameters into {HEAD_MUSCLES.relative_to(ROOT)}")
+    args = parser.parse_args()
+    calibration = Calibration()
+    units = args.units or [au for au in calibration.ict if au in ACTION_UNITS and calibration.entries(au)]
+    for au in units:
+        started = time.perf_counter()
+        before, _ = calibration.measure(calibration.raw, au)
+        loss = calibration.calibrate(au, args.evaluations)
+        after, held = calibration.measure(calibration.raw, au)
+        print(f"{au}: cosine {before.cosine:.2f} -> {after.cosine:.2f}, amplitude {before.amplitude:.2f} -> {after.amplitude:.2f}, "
+              f"inverted {held.inverted}, unsettled {held.unsettled:.1e}, loss {loss:.3f} ({time.perf_counter() - started:.0f} s)",
+              flush=True)
+    if args.write:
+        calibration.write()
+        print(f"wrote {HEAD_MUSCLES}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
