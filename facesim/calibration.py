@@ -14,11 +14,12 @@ at least ``MOVES``:
 
 On the default head the simulated vertices are MediaPipe's landmarks, vertex k lying on
 ICT's vertex ``Head.landmarks[k]``, so ICT's displacement at those vertices is all the
-comparison needs (``landmark_displacements`` keeps them, a few kB per unit, as
-``tests/data/ict_action_units.npz``). The whole face area, which follows the landmarks
-(facesim.figure), is compared by ``scripts/realism.py`` against ICT's full shapes: ICT's
-own displacement carried through the same follow has cosine at least 0.95 with its full
-shape for every unit here, so the landmarks lose little.
+comparison needs (a few kB per unit, ``tests/data/ict_action_units.npz``). Both fields
+are compared where the head shows them, carried over its face area by the same follow
+(``on_face``, facesim.figure): ICT's displacement carried that way keeps cosine at least
+0.95 with its full shape for every unit here, and the face area weighs each region by
+how much of the face it is (the lips and lids have many vertices there, few landmarks).
+``scripts/realism.py`` compares against ICT's full shapes.
 """
 
 from __future__ import annotations
@@ -99,6 +100,15 @@ class Held:
     displacement: np.ndarray
     inverted: int
     unsettled: float
+
+
+def on_face(figure, displacement: np.ndarray) -> np.ndarray:
+    """(FACE_AREA, 3): a displacement of the simulated vertices (n, 3) carried over the
+    head's face area as the head shows it (facesim.figure's follow)."""
+    out = np.zeros((FACE_AREA, 3))
+    rows = figure.follow_rows < FACE_AREA
+    out[figure.follow_rows[rows]] = (figure.follow @ displacement)[rows]
+    return out
 
 
 def hold(model, au: str, intensity: float = 1.0, frames: int = FRAMES) -> Held:

@@ -18,8 +18,9 @@ are driven like muscles, by activations named ``jaw`` and ``eyelid_r`` / ``eyeli
 
 Points are landmark indices or 3D points (cm) snapped to the nearest vertex, so a mesh of
 another topology can carry the same file. Attachments are pinned (the single-layer face has
-no skull to hold them), and so is the outer rim of the mask: without it the mask drifts as
-a whole under the muscle pull.
+no skull to hold them; a head whose skin the hypodermis holds may unpin them, ``Pinned``),
+and so is the outer rim of the mask: without it the mask drifts as a whole under the
+muscle pull.
 """
 
 from __future__ import annotations
@@ -121,8 +122,15 @@ class Eyelid(_Contours):
 
 
 class Pinned(Strict):
+    """Vertices held where the bones put them: the mask's outer rim, listed vertices, and
+    (``attachments``, the thesis's face) each linear muscle's attachment. A head's skin is
+    tied to the skull everywhere by the hypodermis (facesim.model.Material.tissue), so
+    its attachments need no pin, and unpinned they let the skin over the cheekbone and
+    the brow move under other muscles (a cheek raiser lifts the zygomaticus's origin)."""
+
     boundary: Literal["outer", "none"] = "outer"
     vertices: list[int] = []
+    attachments: bool = True
 
 
 class MuscleFile(Strict):
@@ -290,7 +298,7 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         force.append(m.force or spec.defaults.force)
     for v in spec.pinned.vertices:
         _snap(v, mesh, f"{source}: pinned")
-    pinned = {a for a in attachment if a >= 0} | set(spec.pinned.vertices)
+    pinned = {a for a in attachment if a >= 0 and spec.pinned.attachments} | set(spec.pinned.vertices)
     if spec.pinned.boundary == "outer":
         if not mesh.boundary_loops:
             raise InputError(f"{source}: pinned: the mesh has no boundary to pin (a closed head?)")

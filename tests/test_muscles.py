@@ -108,3 +108,8 @@ def test_muscles_given_as_3d_points_snap_to_the_same_vertices(tmp_path, mesh, mu
         assert np.array_equal(getattr(snapped, key), getattr(muscles, key)), key
     assert all(np.array_equal(a, b) for a, b in zip(snapped.ring, muscles.ring))
     assert np.array_equal(snapped.jaw.lower, muscles.jaw.lower) and np.array_equal(snapped.eyelids[1].upper, muscles.eyelids[1].upper)
+
+
+def test_a_head_held_by_its_hypodermis_leaves_its_attachments_free(tmp_path, mesh):
+    pinned = load_muscles(write_muscles(tmp_path, lambda d: d["pinned"].update(attachments=False)), mesh).pinned
+    assert set(pinned.tolist()) == set(mesh.boundary_loops[0].tolist())
