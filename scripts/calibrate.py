@@ -44,6 +44,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from facesim.calibration import compare, hold, on_face  # noqa: E402
+from facesim.errors import InputError, SimulationError  # noqa: E402
 from facesim.simulate import figure_for  # noqa: E402
 from facesim.config import HEAD, HEAD_MUSCLES  # noqa: E402
 from facesim.mesh import load_face, mirror_map  # noqa: E402
@@ -120,7 +121,7 @@ class Calibration:
     def loss(self, raw: dict, au: str) -> float:
         try:
             c, held = self.measure(raw, au)
-        except Exception:  # a simulation that blows up is the worst outcome, not a stop
+        except (InputError, SimulationError):  # a placement off the face, a blow-up: the worst outcome, not a stop
             return 10.0
         return ((1.0 - c.cosine) + 0.5 * math.log(max(c.amplitude, 1e-6)) ** 2 + 0.3 * held.inverted
                 + 0.1 * max(0.0, math.log10(max(held.unsettled, 1e-12) / 1e-3)))
@@ -165,7 +166,7 @@ class Calibration:
         for _ in range(steps):
             try:
                 c, _ = self.measure(raw, au)
-            except Exception:
+            except (InputError, SimulationError):
                 return raw
             if abs(math.log(max(c.amplitude, 1e-6))) < 0.05:
                 break
