@@ -111,15 +111,17 @@ def on_face(figure, displacement: np.ndarray) -> np.ndarray:
     return out
 
 
-def hold(model, au: str, intensity: float = 1.0, frames: int = FRAMES) -> Held:
-    """Simulate ``au`` alone on ``model`` (facesim.model.Model), eased in and held."""
+def hold(model, au: str, intensity: float = 1.0, frames: int = FRAMES, figure=None) -> Held:
+    """Simulate ``au`` alone on ``model`` (facesim.model.Model), eased in and held.
+    ``figure``: the head it drives (default: built for the model); a caller trying many
+    muscle files on one head passes the one it built, whose follow they all share."""
     from .simulate import figure_for, run
     from .spec import Spec, activation_table
 
     spec = Spec.model_validate(dict(name=au, frames=frames, onset=ONSET, aus={au: intensity}))
     positions, energy, inverted, _ = run(model, activation_table(spec, model.muscles), spec.dt, stop_on_inversion=False)
     displacement = positions[-1] - model.rest_position
-    figure = figure_for(model)
+    figure = figure_for(model) if figure is None else figure
     if figure is not None:
         displacement = displacement * figure.follow_gain[:, None]
     return Held(displacement, int(inverted.max()), float(energy[-1] / max(energy.max(), 1e-300)))

@@ -71,6 +71,9 @@ class Calibration:
         self.ict = {str(au): d.astype(np.float64) for au, d in zip(data["action_units"], data["displacement"])}
         self.material = material
         self.mirror = mirror_map(self.mesh.vertices, self.mesh.faces)
+        # the head and its follow do not change with the muscles: built once, not per evaluation
+        self.figure = figure_for(self.model(self.raw))
+        self.ict_face = {au: on_face(self.figure, d) for au, d in self.ict.items()}
 
     def entries(self, au: str) -> list[list[dict]]:
         """The muscle file's entries an action unit drives, grouped by muscle (left and
@@ -112,11 +115,12 @@ class Calibration:
                     entry["zone"] = round(float(np.clip(zone[0], *BOUNDS["zone"])), 1)
         return raw
 
+    def model(self, raw: dict):
+        return build_model(self.mesh, resolve_muscles(MuscleFile.model_validate(raw), self.mesh), self.material)
+
     def measure(self, raw: dict, au: str):
-        model = build_model(self.mesh, resolve_muscles(MuscleFile.model_validate(raw), self.mesh), self.material)
-        held = hold(model, au)
-        figure = figure_for(model)
-        return compare(on_face(figure, held.displacement), on_face(figure, self.ict[au])), held
+        held = hold(self.model(raw), au, figure=self.figure)
+        return compare(on_face(self.figure, held.displacement), self.ict_face[au]), held
 
     def loss(self, raw: dict, au: str) -> float:
         try:
