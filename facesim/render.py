@@ -361,13 +361,12 @@ class FaceRenderer:
             self._upload(self._arrows, lines)
         return self._finish()
 
-    def render_figure(self, scene: np.ndarray, pose=None) -> np.ndarray:
+    def render_figure(self, scene: np.ndarray) -> np.ndarray:
         """One frame of a head given every vertex of its figure (N, 3) rather than its
-        simulation mesh: a scanned shape drawn with the same camera and lights
-        (``scripts/realism.py``'s atlas). Returns (height, width, 3) uint8."""
-        pose = np.zeros(3) if pose is None else np.asarray(pose, dtype=np.float64)
+        simulation mesh, at rest pose: a scanned shape drawn with the same camera and
+        lights (``scripts/realism.py``'s atlas). Returns (height, width, 3) uint8."""
         self._renderer._platform.make_current()
-        self.pose(*pose[:3])
+        self.pose()
         self._draw_figure(np.ascontiguousarray(scene, dtype=np.float64))
         return self._finish()
 
