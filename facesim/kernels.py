@@ -7,6 +7,8 @@ them, one line per term.
 
 - ``_spring_forces``         non-linear springs, eq. 3.6 (their g, eq. 3.17, as stiffness)
 - ``_edge_repulsion_forces`` edge repulsion, eq. 3.7 (its h, eq. 3.17, as stiffness)
+- ``_bending_forces``        bending of the skin's displacement (not in the thesis: the
+                             quadratic bending energy of Bergou et al. 2006)
 - ``_damping_forces``        viscous damping, eq. 3.10 (taken implicitly by the solvers)
 - ``_tissue_forces``         hypodermis springs to the rig's targets, and the rig's drive
 - ``_muscle_forces``         linear muscles, eq. 3.1-3.4, and sphincters (facesim.muscles),
@@ -39,12 +41,13 @@ ModelArrays = namedtuple("ModelArrays", [
     "rest_position", "faces", "rest_normal", "rest_area", "rest_against", "pinned",
     "neighbour_start", "neighbour_index", "ring_start", "ring_a", "ring_b",
     "spring_indices", "spring_rest_length", "repulsion_vertex", "repulsion_edge", "repulsion_rest_distance",
+    "hinge", "hinge_weight",
     "muscle_kind", "muscle_axes", "muscle_insertion", "muscle_centre_start", "muscle_centre_index",
     "muscle_cos_zone", "muscle_r", "muscle_r_max", "muscle_force", "axis_x", "axis_z", "radius",
     "jaw_column", "jaw_weight", "jaw_hinge", "jaw_axis", "jaw_max", "lid_column", "lid_centre", "lid_delta",
     "drive_column", "drive_weight", "contact_upper", "contact_lower", "contact_gap",
     "mass", "damping", "stiffness", "nonlinearity", "repulsion_nonlinearity", "length_unit", "tissue", "drive",
-    "edge_repulsion", "uv_projection", "implicit", "iterations", "tolerance",
+    "bending", "edge_repulsion", "uv_projection", "implicit", "iterations", "tolerance",
 ])
 #: What a step reads and advances: positions x and velocities v, (n, 3) each.
 State = namedtuple("State", ["x", "v"])
@@ -54,13 +57,15 @@ State = namedtuple("State", ["x", "v"])
 #: in the frame they act in, from the same bones (``_rig_control``).
 Control = namedtuple("Control", ["activation", "target", "hold", "origin", "insertion_point"])
 #: The whole stiffness K = -∂F/∂X that an implicit solver needs, where the K_i above keep
-#: one number per vertex: link l joins the vertices ``node[l]`` (3) with weights
+#: one number per vertex: link l joins the vertices ``node[l]`` (4) with weights
 #: ``weight[l]``, its extension u = Σ_k w_k X_node[l, k] (a spring: X_i - X_j; edge
-#: repulsion: X_i - P_k), and adds w_p w_q B to the 3x3 block (p, q) of K, with
+#: repulsion: X_i - P_k; a bending hinge: its four vertices' stencil), and adds
+#: w_p w_q B to the 3x3 block (p, q) of K, with
 #: B = along a aᵀ + across (I - a aᵀ) for its unit ``axis`` a; ``diagonal`` (n,) adds an
 #: isotropic stiffness per vertex (the hypodermis). B is positive semi-definite: along is
 #: the derivative of the tension, across the tension over the length, and 0 when
-#: compressed (the usual clamp: a compressed spring's sideways instability is left out).
+#: compressed (the usual clamp: a compressed spring's sideways instability is left out);
+#: a hinge's B is isotropic (along = across).
 Links = namedtuple("Links", ["node", "weight", "axis", "along", "across", "diagonal"])
 #: What the force terms add into: ``force`` (n, 3), ``stiffness`` (n,) the K_i and
 #: ``damping`` (n,) the C_i of the module docstring, and the ``links`` of K.
@@ -76,10 +81,11 @@ def workspace(n: int) -> Workspace:
 
 
 def forces(model: ModelArrays) -> Forces:
-    """Zeroed accumulators for a model: one link per spring, then one per repulsion pair."""
+    """Zeroed accumulators for a model: one link per spring, then one per repulsion pair,
+    then one per bending hinge."""
     n = model.rest_position.shape[0]
-    count = model.spring_indices.shape[0] + model.repulsion_vertex.shape[0]
-    links = Links(np.zeros((count, 3), dtype=np.int64), np.zeros((count, 3)), np.zeros((count, 3)), np.zeros(count),
+    count = model.spring_indices.shape[0] + model.repulsion_vertex.shape[0] + model.hinge.shape[0]
+    links = Links(np.zeros((count, 4), dtype=np.int64), np.zeros((count, 4)), np.zeros((count, 3)), np.zeros(count),
                   np.zeros(count), np.zeros(n))
     return Forces(np.zeros((n, 3)), np.zeros(n), np.zeros(n), links)
 
@@ -147,15 +153,17 @@ def _nonlinear_coefficient(length, rest, k0, exponent, unit):
 
 @njit(**NUMBA_OPTIONS)
 def _set_link(links, l, i, j, k, wi, wj, wk, dx, dy, dz, length, g, along):
-    """Link l of K (``Links``): nodes i, j, k with weights, axis (dx, dy, dz) / length,
-    the tension's derivative ``along`` and -g (the tension over the length, eq. 3.17's g
-    with its sign turned) across, clamped at 0."""
+    """Link l of K (``Links``): nodes i, j, k with weights (the fourth node unused),
+    axis (dx, dy, dz) / length, the tension's derivative ``along`` and -g (the tension
+    over the length, eq. 3.17's g with its sign turned) across, clamped at 0."""
     links.node[l, 0] = i
     links.node[l, 1] = j
     links.node[l, 2] = k
+    links.node[l, 3] = k
     links.weight[l, 0] = wi
     links.weight[l, 1] = wj
     links.weight[l, 2] = wk
+    links.weight[l, 3] = 0.0
     inverse = 1.0 / max(length, LENGTH_EPS)
     links.axis[l, 0] = dx * inverse
     links.axis[l, 1] = dy * inverse
@@ -260,6 +268,56 @@ def _edge_repulsion_forces(model, xp, forces):
         forces.force[b, 0] += wb * dx
         forces.force[b, 1] += wb * dy
         forces.force[b, 2] += wb * dz
+
+
+@njit(**NUMBA_OPTIONS)
+def _bending_forces(model, xp, control, forces):
+    """Bending: each interior edge's hinge (its two triangles' four vertices) resists a
+    change of the skin's curvature, with the quadratic energy of Bergou, Wardetzky, Harmon,
+    Zorin and Grinspun, "A quadratic bending model for inextensible surfaces" (2006),
+
+        E = ½ k_b Σ_e (Σ_k w_ek U_k)²,  U = X - target (each coordinate),
+
+    where w_e is the hinge's cotangent stencil scaled by √(3 / (A_0 + A_1)) at rest
+    (facesim.model), so Σ_k w_ek X_k measures the hinge's bend and vanishes on a flat one.
+    Bergou et al. apply it to the positions of a flat sheet; a face is curved at rest, so
+    here it acts on the displacement from where the bones hold the skin (the rest shape
+    moved by the jaw and lids): zero at rest and under the rig, and for the small turns
+    of skin under muscles the change of the hinge's bend. Not in the thesis (k_b = 0 is
+    its model): a spring lattice has no bending stiffness, so where muscles compress the
+    skin it buckles into lumps and its sliver triangles turn over (issue 16). The energy
+    is quadratic, so its stiffness k_b w wᵀ (link s + r + e of K) is constant and exact.
+    """
+    if model.bending == 0.0:
+        return
+    offset = model.spring_indices.shape[0] + model.repulsion_vertex.shape[0]
+    kb = model.bending
+    links = forces.links
+    for e in range(model.hinge.shape[0]):
+        bx = 0.0
+        by = 0.0
+        bz = 0.0
+        for k in range(4):
+            node = model.hinge[e, k]
+            w = model.hinge_weight[e, k]
+            bx += w * (xp[node, 0] - control.target[node, 0])
+            by += w * (xp[node, 1] - control.target[node, 1])
+            bz += w * (xp[node, 2] - control.target[node, 2])
+        l = offset + e
+        for k in range(4):
+            node = model.hinge[e, k]
+            w = model.hinge_weight[e, k]
+            forces.force[node, 0] -= kb * w * bx
+            forces.force[node, 1] -= kb * w * by
+            forces.force[node, 2] -= kb * w * bz
+            forces.stiffness[node] -= kb * w * w
+            links.node[l, k] = node
+            links.weight[l, k] = w
+        links.axis[l, 0] = 1.0
+        links.axis[l, 1] = 0.0
+        links.axis[l, 2] = 0.0
+        links.along[l] = kb
+        links.across[l] = kb
 
 
 @njit(**NUMBA_OPTIONS)

@@ -71,6 +71,8 @@ class Material(Strict):
     iterations: int = Field(60, ge=1, le=10000, description="most conjugate-gradient iterations per implicit step")
     tolerance: float = Field(1e-3, gt=0, lt=1, description="the implicit step's conjugate gradients stop when the "
                              "residual has fallen by this factor")
+    bending: float = Field(0.0, ge=0, description="bending stiffness k_b of the skin's displacement (kernels._bending_forces; "
+                           "not in the thesis, where it is 0)")
     edge_repulsion: bool = Field(True, description="edge repulsion (eq. 3.7); off reproduces the thesis's fig. 3.16")
     uv_projection: bool = Field(True, description="muscle forces in the 2D projection (eq. 3.21-3.25); off: in 3D")
 
@@ -96,6 +98,8 @@ class Model:
     repulsion_vertex: np.ndarray  # (r,)
     repulsion_edge: np.ndarray  # (r, 2)
     repulsion_rest_distance: np.ndarray  # (r,)
+    hinge: np.ndarray  # (e, 4) interior edges' hinges: the edge's ends, then the two opposite vertices
+    hinge_weight: np.ndarray  # (e, 4) their bending stencils (kernels._bending_forces)
     muscle_kind: np.ndarray  # (M,) LINEAR or SPHINCTER
     muscle_axes: np.ndarray  # (M, 2) a sphincter's semi-axes in the muscle frame (cm)
     muscle_origin: np.ndarray  # (M, 3) attachment O (a sphincter's centre) at rest, in the muscle frame
@@ -169,6 +173,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
 
     pinned = np.zeros(n, dtype=bool)
     pinned[muscles.pinned] = True
+    hinge, hinge_weight = bending_hinges(x, faces)
 
     axis_x, axis_z, radius = mesh.vertical_axis
     resolution = float(mesh.face_areas.sum() / n / REFERENCE_VERTEX_AREA)
@@ -190,6 +195,8 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         repulsion_vertex=repulsion_vertex,
         repulsion_edge=repulsion_edge,
         repulsion_rest_distance=altitude,
+        hinge=hinge,
+        hinge_weight=hinge_weight,
         muscle_kind=muscles.kind,
         muscle_insertion=muscles.insertion,
         muscle_centre_start=muscles.centre_start,
@@ -210,7 +217,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         **{key: _frozen(np.asarray(value)) for key, value in vars(rig).items() if key not in ("jaw_column", "jaw_max")},
         jaw_column=int(rig.jaw_column), jaw_max=float(rig.jaw_max),
         **{key: float(getattr(resolved, key)) for key in ("mass", "damping", "stiffness", "nonlinearity",
-                                                           "repulsion_nonlinearity", "tissue", "drive")},
+                                                           "repulsion_nonlinearity", "tissue", "drive", "bending")},
         length_unit=length_unit, edge_repulsion=bool(resolved.edge_repulsion), uv_projection=bool(resolved.uv_projection),
         implicit=resolved.solver == "implicit", iterations=int(resolved.iterations), tolerance=float(resolved.tolerance),
     )
@@ -233,6 +240,40 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         **arrays, **constants, material=resolved, muscles=muscles, rig=rig, scale=mesh.scale, resolution=resolution,
         length_unit=length_unit, mesh=mesh, arrays=kernel_arrays._replace(**falloffs),
     )
+
+
+#: The hinges' cotangents are clamped to this magnitude (angles of about 5.7 to 174 degrees):
+#: a sliver triangle's near-zero angle would otherwise make its hinge stiffer without bound.
+COTANGENT_LIMIT = 10.0
+
+
+def bending_hinges(x: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each interior edge's hinge (x0, x1 its ends, x2 and x3 the vertices opposite it)
+    and the stencil of Bergou et al. (2006) at rest, ``sqrt(3 / (A0 + A1)) (c03 + c04,
+    c01 + c02, -c01 - c03, -c02 - c04)``, c0k the cotangent of the angle at x0 in the
+    triangle holding xk and c1k at x1 (clamped to ``COTANGENT_LIMIT``). Applied to the
+    positions it is -√(3 / (A0 + A1)) |e| (n0 + n1), n0 and n1 the unit normals to the edge in
+    their planes: zero on a flat hinge, whatever affine map moves it. Triangle pairs from
+    trimesh's face adjacency (the mesh kept unprocessed: its vertex order is facesim's)."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(x, faces, process=False)
+    edge = mesh.face_adjacency_edges
+    opposite = mesh.face_adjacency_unshared
+    hinge = np.column_stack([edge, opposite]).astype(np.int64)
+    p = x[hinge]  # (e, 4, 3)
+
+    def cotangent(at, a, b):
+        u, v = p[:, a] - p[:, at], p[:, b] - p[:, at]
+        cot = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(np.cross(u, v), axis=1), 1e-12)
+        return np.clip(cot, -COTANGENT_LIMIT, COTANGENT_LIMIT)
+
+    c01, c02 = cotangent(0, 1, 2), cotangent(0, 1, 3)
+    c03, c04 = cotangent(1, 0, 2), cotangent(1, 0, 3)
+    areas = 0.5 * (np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+                   + np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 3] - p[:, 0]), axis=1))
+    stencil = np.column_stack([c03 + c04, c01 + c02, -c01 - c03, -c02 - c04])
+    return hinge, stencil * np.sqrt(3.0 / areas)[:, None]
 
 
 def ellipse_axes(points: np.ndarray, where: str) -> tuple[float, float]:

@@ -60,6 +60,7 @@ def _forces(model, xp, control, work, forces):
     forces.links.diagonal[:] = 0.0
     kernels._spring_forces(model, xp, forces)  # eq. 3.6
     kernels._edge_repulsion_forces(model, xp, forces)  # eq. 3.7
+    kernels._bending_forces(model, xp, control, forces)  # Bergou et al. 2006, on the displacement
     kernels._damping_forces(model, forces)  # eq. 3.10
     kernels._tissue_forces(model, xp, control, forces)  # hypodermis, and the rig's drive
     kernels._muscle_forces(model, xp, control, work, forces)  # eq. 3.1-3.4, 3.21-3.25
@@ -108,7 +109,7 @@ def _stiffness_product(links, p, out):
         ux = 0.0
         uy = 0.0
         uz = 0.0
-        for k in range(3):
+        for k in range(4):
             w = links.weight[l, k]
             node = links.node[l, k]
             ux += w * p[node, 0]
@@ -120,7 +121,7 @@ def _stiffness_product(links, p, out):
         bx = across * ux + projection * ax
         by = across * uy + projection * ay
         bz = across * uz + projection * az
-        for k in range(3):
+        for k in range(4):
             w = links.weight[l, k]
             node = links.node[l, k]
             out[node, 0] += w * bx
@@ -147,7 +148,7 @@ def _jacobi(model, forces, h, out):
             out[i, d] = model.mass + h * forces.damping[i] + h * h * links.diagonal[i]
     for l in range(links.along.shape[0]):
         across = links.across[l]
-        for k in range(3):
+        for k in range(4):
             w2 = h * h * links.weight[l, k] * links.weight[l, k]
             node = links.node[l, k]
             for d in range(3):

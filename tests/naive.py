@@ -48,6 +48,17 @@ def repulsion_terms(x, xp, vertex, edge, rest, k0, zeta, unit=1.0):
     return stiff, pull
 
 
+def bending_terms(xp, target, hinge, weight, kb):
+    """The bending energy E = ½ k_b Σ_e |Σ_k w_ek (X_k - target_k)|² (kernels._bending_forces):
+    its force -∂E/∂X and the scalar stiffness of eq. 3.19, -k_b Σ_e w_ek² at each vertex."""
+    bend = np.einsum("ek,ekd->ed", weight, (xp - target)[hinge])
+    force = np.zeros_like(xp)
+    stiff = np.zeros(len(xp))
+    np.add.at(force, hinge.ravel(), -kb * (weight[:, :, None] * bend[:, None, :]).reshape(-1, 3))
+    np.add.at(stiff, hinge.ravel(), -kb * weight.ravel() ** 2)
+    return stiff, force
+
+
 def tissue_terms(x, target, tissue, hold=0.0):
     """Springs of stiffness tissue + hold tying each vertex to its target."""
     k = tissue + np.broadcast_to(hold, (len(x),))
@@ -202,6 +213,9 @@ def step(model, x, v, activation, h):
     if mat.edge_repulsion:
         s, p = repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance,
                                mat.stiffness, mat.repulsion_nonlinearity, unit)
+        stiff, pull = stiff + s, pull + p
+    if mat.bending:
+        s, p = bending_terms(xp, target, model.hinge, model.hinge_weight, mat.bending)
         stiff, pull = stiff + s, pull + p
     force = muscle_forces(model, xp, activation, target)
     denominator = np.maximum(mat.mass + h * mat.damping - h * h * stiff, mat.mass)

@@ -55,6 +55,71 @@ def test_edge_repulsion_is_zero_at_rest(model):
     assert np.abs(forces.force).max() < 1e-9
 
 
+@pytest.mark.parametrize("kb", [0.0, 40.0])
+def test_bending_matches_reference(model, rng, kb):
+    x, target = perturbed(model, rng, scale=0.05)
+    forces = K.forces(model.arrays)
+    control = K.control(model.arrays, np.zeros(len(model.muscles.names)))._replace(target=target)
+    K._bending_forces(model.arrays._replace(bending=kb), x, control, forces)
+    ref_stiff, ref_force = naive.bending_terms(x, target, model.hinge, model.hinge_weight, kb)
+    assert_close(forces.stiffness, ref_stiff)
+    assert_close(forces.force, ref_force)
+    if kb:  # the force is the energy's downhill gradient: E(X + εp) - E(X - εp) = -2ε F·p
+        p, eps = rng.standard_normal(x.shape), 1e-6
+
+        def energy(at):
+            bend = np.einsum("ek,ekd->ed", model.hinge_weight, (at - target)[model.hinge])
+            return 0.5 * kb * (bend**2).sum()
+
+        slope = (energy(x + eps * p) - energy(x - eps * p)) / (2 * eps)
+        assert abs(slope + (forces.force * p).sum()) <= 1e-6 * abs(slope)
+
+
+def test_bending_stencil_measures_the_hinges_bend(model, rng):
+    """Each hinge's stencil (model.bending_hinges) applied to positions is -√(3 / (A0 + A1))
+    |e| (n0 + n1), n0 and n1 the unit normals to the shared edge in each triangle's
+    plane, pointing to the opposite vertex: zero for a flat hinge, after any affine map."""
+    from facesim.model import COTANGENT_LIMIT, bending_hinges
+
+    p = model.rest_position[model.hinge]  # (e, 4, 3)
+    edge = p[:, 1] - p[:, 0]
+    length = np.linalg.norm(edge, axis=1)
+
+    def towards(k):
+        a = p[:, k] - p[:, 0]
+        n = a - (np.einsum("ij,ij->i", a, edge) / length**2)[:, None] * edge
+        return n / np.linalg.norm(n, axis=1)[:, None], 0.5 * np.linalg.norm(np.cross(edge, a), axis=1)
+
+    (n0, a0), (n1, a1) = towards(2), towards(3)
+    expected = -np.sqrt(3 / (a0 + a1))[:, None] * length[:, None] * (n0 + n1)
+    measured = np.einsum("ek,ekd->ed", model.hinge_weight, p)
+
+    def cot(at, a, b):
+        u, v = p[:, a] - p[:, at], p[:, b] - p[:, at]
+        return np.einsum("ij,ij->i", u, v) / np.linalg.norm(np.cross(u, v), axis=1)
+
+    sliver = np.max(np.abs([cot(0, 1, 2), cot(0, 1, 3), cot(1, 0, 2), cot(1, 0, 3)]), axis=0) > COTANGENT_LIMIT
+    assert sliver.mean() < 0.05  # hinges with an angle past the cotangent clamp are few
+    assert_close(measured[~sliver], expected[~sliver], rtol=1e-9)
+
+    flat = np.array([[0, 0, 0], [1, 0.1, 0], [0.4, 0.8, 0], [0.6, -0.9, 0]], float)
+    hinge, weight = bending_hinges(flat, np.array([[0, 1, 2], [1, 0, 3]]))
+    affine = flat @ rng.standard_normal((3, 3)).T + rng.standard_normal(3)
+    assert np.abs(weight[0] @ affine[hinge[0]]).max() < 1e-12
+    assert np.abs(weight[0] @ flat[hinge[0]]).max() < 1e-12
+
+
+def test_bending_is_zero_where_the_bones_hold_the_skin(model):
+    """No bending force at rest, nor when the skin is where the jaw and lids take it."""
+    activation = np.zeros(len(model.muscles.names))
+    activation[model.muscle_count:] = 1.0
+    for a in (np.zeros_like(activation), activation):
+        control = K.control(model.arrays, a)
+        forces = K.forces(model.arrays)
+        K._bending_forces(model.arrays._replace(bending=40.0), control.target.copy(), control, forces)
+        assert np.abs(forces.force).max() < 1e-9
+
+
 def test_tissue_matches_reference(model, rng):
     x, target = perturbed(model, rng)
     hold = rng.uniform(0, 1000, len(x)) * (rng.uniform(size=len(x)) > 0.8)
@@ -262,16 +327,16 @@ def dense_stiffness(links, n):
     k = np.kron(np.diag(links.diagonal), np.eye(3))
     for node, weight, a, along, across in zip(links.node, links.weight, links.axis, links.along, links.across):
         block = along * np.outer(a, a) + across * (np.eye(3) - np.outer(a, a))
-        for p in range(3):
-            for q in range(3):
+        for p in range(4):
+            for q in range(4):
                 k[3 * node[p]:3 * node[p] + 3, 3 * node[q]:3 * node[q] + 3] += weight[p] * weight[q] * block
     return k
 
 
-def test_links_are_the_jacobian_of_the_springs_and_tissue(model, rng):
+def test_links_are_the_jacobian_of_the_springs_tissue_and_bending(model, rng):
     """Where every spring is stretched (nothing clamped), K p from the links is the
     derivative of the forces along p: -(F(X + εp) - F(X - εp)) / 2ε."""
-    arrays = model.arrays._replace(edge_repulsion=False)
+    arrays = model.arrays._replace(edge_repulsion=False, bending=40.0)
     centre = model.rest_position.mean(axis=0)
     x = centre + 1.08 * (model.rest_position - centre) + 0.002 * rng.standard_normal(model.rest_position.shape)
     control = K.control(arrays, np.zeros(len(model.muscles.names)))
@@ -282,6 +347,7 @@ def test_links_are_the_jacobian_of_the_springs_and_tissue(model, rng):
         forces.links.diagonal[:] = 0.0
         K._spring_forces(arrays, np.ascontiguousarray(at), forces)
         K._tissue_forces(arrays, np.ascontiguousarray(at), control, forces)
+        K._bending_forces(arrays, np.ascontiguousarray(at), control, forces)
         return forces.force.copy()
 
     p = rng.standard_normal(x.shape)
