@@ -100,6 +100,8 @@ class Held:
     displacement: np.ndarray
     inverted: int
     unsettled: float
+    kinetic_energy: np.ndarray  # (frames,)
+    last_step: float  # the most a vertex moved in the last frame (cm)
 
 
 def on_face(figure, displacement: np.ndarray) -> np.ndarray:
@@ -111,17 +113,20 @@ def on_face(figure, displacement: np.ndarray) -> np.ndarray:
     return out
 
 
-def hold(model, au: str, intensity: float = 1.0, frames: int = FRAMES, figure=None) -> Held:
-    """Simulate ``au`` alone on ``model`` (facesim.model.Model), eased in and held.
-    ``figure``: the head it drives (default: built for the model); a caller trying many
-    muscle files on one head passes the one it built, whose follow they all share."""
+def hold(model, au: str | tuple[str, ...], intensity: float = 1.0, frames: int = FRAMES, figure=None) -> Held:
+    """Simulate ``au`` alone (or several units together) on ``model``
+    (facesim.model.Model), eased in and held. ``figure``: the head it drives (default:
+    built for the model); a caller trying many muscle files on one head passes the one it
+    built, whose follow they all share."""
     from .simulate import figure_for, run
     from .spec import Spec, activation_table
 
-    spec = Spec.model_validate(dict(name=au, frames=frames, onset=ONSET, aus={au: intensity}))
+    units = (au,) if isinstance(au, str) else au
+    spec = Spec.model_validate(dict(name="+".join(units), frames=frames, onset=ONSET, aus={u: intensity for u in units}))
     positions, energy, inverted, _ = run(model, activation_table(spec, model.muscles), spec.dt, stop_on_inversion=False)
     displacement = positions[-1] - model.rest_position
     figure = figure_for(model) if figure is None else figure
     if figure is not None:
         displacement = displacement * figure.follow_gain[:, None]
-    return Held(displacement, int(inverted.max()), float(energy[-1] / max(energy.max(), 1e-300)))
+    return Held(displacement, int(inverted.max()), float(energy[-1] / max(energy.max(), 1e-300)), energy,
+                float(np.linalg.norm(positions[-1] - positions[-2], axis=1).max()))

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from .errors import InputError
 from .kernels import ModelArrays
@@ -53,9 +53,23 @@ REFERENCE_VERTEX_AREA = 0.5898477858884484
 SUBSTEPS = {"implicit": 1, "quasi-implicit": 4}
 
 
-class Material(Strict):
-    """Mass-spring-damper parameters (thesis section 3.1.3)."""
+#: Material presets: the fields a preset sets where a spec leaves them out. ``thesis``
+#: reproduces the thesis's model for its tables in BENCHMARKS.md: its update, eq.
+#: 3.14-3.20, at four steps per frame, and no bending. The hypodermis stays: without it
+#: the thesis's update folds happy at Table 3.3's longest step (Δt = 0.015 s; measured).
+#: ``facesim`` is the defaults below.
+PRESETS = {
+    "facesim": {},
+    "thesis": dict(solver="quasi-implicit", bending=0.0),
+}
 
+
+class Material(Strict):
+    """Mass-spring-damper parameters (thesis section 3.1.3). ``preset`` fills the fields
+    a spec does not give (``PRESETS``); fields given win."""
+
+    preset: Literal["facesim", "thesis"] = Field("facesim", description="facesim: the defaults below; thesis: the "
+                                                 "thesis's model (quasi-implicit update, no bending)")
     mass: float = Field(1.0, gt=0, description="point mass m of every vertex")
     stiffness: float = Field(1000.0, gt=0, description="spring stiffness k0, eq. 3.6 and 3.7")
     nonlinearity: float = Field(5.0, ge=0, description="spring non-linearity γ, eq. 3.6")
@@ -75,6 +89,13 @@ class Material(Strict):
                            "not in the thesis, where it is 0)")
     edge_repulsion: bool = Field(True, description="edge repulsion (eq. 3.7); off reproduces the thesis's fig. 3.16")
     uv_projection: bool = Field(True, description="muscle forces in the 2D projection (eq. 3.21-3.25); off: in 3D")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _preset(cls, data):
+        if isinstance(data, dict) and data.get("preset") in PRESETS:
+            return {**PRESETS[data["preset"]], **data}
+        return data
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ time step. A spec is a YAML file validated by pydantic (unknown fields are error
     pose: [...]                 # key-framed head yaw/pitch/roll and gaze yaw/pitch (degrees)
     include: [{spec: happy, weight: 0.6}]   # blends of other specs
     sequence: [...]             # expressions one after another
-    material: {damping: 40}     # optional overrides of facesim.model.Material
+    material: {damping: 40}     # optional overrides of facesim.model.Material; {preset: thesis}: the thesis's model
     mesh: my_face.obj           # optional, relative to the spec (default: ICT's head, meshes/ict/head.npz)
     identity: 3                 # the head's identity: a seed, or weights of its 100 modes
     muscles: my_face.muscles.yaml

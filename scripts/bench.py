@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 import facesim  # noqa: E402
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES  # noqa: E402
 from facesim.mesh import load_mesh, subdivide  # noqa: E402
-from facesim.model import build_model  # noqa: E402
+from facesim.model import Material, build_model  # noqa: E402
 from facesim.muscles import MuscleFile, muscles_as_points, resolve_muscles  # noqa: E402
 from facesim.schema import load_model  # noqa: E402
 from facesim.simulate import model_for, run  # noqa: E402
@@ -50,9 +50,12 @@ def solved_by(name: str, solver: str, **changes):
 
 
 def thesis_spec(name: str, solver: str = "quasi-implicit", **changes):
-    """An expression of the library on the Hopper face, by the thesis's update unless
+    """An expression of the library on the Hopper face, in the thesis's model (the
+    ``thesis`` material preset: no hypodermis, no bending), by the thesis's update unless
     ``solver`` says otherwise."""
-    return solved_by(name, solver, mesh=HOPPER_MESH, **changes)
+    spec = facesim.load_spec(EXPRESSIONS / f"{name}.yaml")
+    material = Material.model_validate({**spec.material.model_dump(exclude_unset=True), "preset": "thesis", "solver": solver})
+    return spec.with_overrides(material=material, mesh=HOPPER_MESH, **changes)
 
 
 #: Thesis Table 3.1: activated muscles, elapsed seconds for 35 frames, frames per second.
