@@ -173,6 +173,33 @@ def _set_link(links, l, i, j, k, wi, wj, wk, dx, dy, dz, length, g, along):
 
 
 @njit(**NUMBA_OPTIONS)
+def _link_extension(links, l, p):
+    """Σ_k w_k p_node[l, k], link l's extension (``Links``) in the vectors ``p`` (n, 3)."""
+    ux = 0.0
+    uy = 0.0
+    uz = 0.0
+    for k in range(4):
+        w = links.weight[l, k]
+        node = links.node[l, k]
+        ux += w * p[node, 0]
+        uy += w * p[node, 1]
+        uz += w * p[node, 2]
+    return ux, uy, uz
+
+
+@njit(**NUMBA_OPTIONS)
+def _link_spread(links, l, scale, bx, by, bz, out):
+    """out[node[l, k]] += scale w_k b for link l's nodes: a vector b acting on its
+    extension, carried back to the vertices (the transpose of ``_link_extension``)."""
+    for k in range(4):
+        w = scale * links.weight[l, k]
+        node = links.node[l, k]
+        out[node, 0] += w * bx
+        out[node, 1] += w * by
+        out[node, 2] += w * bz
+
+
+@njit(**NUMBA_OPTIONS)
 def _spring_forces(model, xp, forces):
     """Springs on the mesh edges, eq. 3.6, at the predicted positions: F_i = g (X_i* - X_j*),
     its g into both ends' stiffness (eq. 3.17), and spring s as link s of K."""
@@ -294,6 +321,20 @@ def _bending_forces(model, xp, control, forces):
     kb = model.bending
     links = forces.links
     for e in range(model.hinge.shape[0]):
+        l = offset + e
+        for k in range(4):
+            node = model.hinge[e, k]
+            w = model.hinge_weight[e, k]
+            forces.stiffness[node] -= kb * w * w
+            links.node[l, k] = node
+            links.weight[l, k] = w
+        links.axis[l, 0] = 1.0
+        links.axis[l, 1] = 0.0
+        links.axis[l, 2] = 0.0
+        links.along[l] = kb
+        links.across[l] = kb
+        # w · U summed over the differences U = X - target, not as w · X - w · target: the
+        # weights reach 100 and the positions 10 cm, and the two sums would cancel to 1e-9
         bx = 0.0
         by = 0.0
         bz = 0.0
@@ -303,21 +344,7 @@ def _bending_forces(model, xp, control, forces):
             bx += w * (xp[node, 0] - control.target[node, 0])
             by += w * (xp[node, 1] - control.target[node, 1])
             bz += w * (xp[node, 2] - control.target[node, 2])
-        l = offset + e
-        for k in range(4):
-            node = model.hinge[e, k]
-            w = model.hinge_weight[e, k]
-            forces.force[node, 0] -= kb * w * bx
-            forces.force[node, 1] -= kb * w * by
-            forces.force[node, 2] -= kb * w * bz
-            forces.stiffness[node] -= kb * w * w
-            links.node[l, k] = node
-            links.weight[l, k] = w
-        links.axis[l, 0] = 1.0
-        links.axis[l, 1] = 0.0
-        links.axis[l, 2] = 0.0
-        links.along[l] = kb
-        links.across[l] = kb
+        _link_spread(links, l, -kb, bx, by, bz, forces.force)  # F = -k_b w (w · U)
 
 
 @njit(**NUMBA_OPTIONS)

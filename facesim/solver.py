@@ -106,27 +106,14 @@ def _stiffness_product(links, p, out):
         for d in range(3):
             out[i, d] = links.diagonal[i] * p[i, d]
     for l in range(links.along.shape[0]):
-        ux = 0.0
-        uy = 0.0
-        uz = 0.0
-        for k in range(4):
-            w = links.weight[l, k]
-            node = links.node[l, k]
-            ux += w * p[node, 0]
-            uy += w * p[node, 1]
-            uz += w * p[node, 2]
+        ux, uy, uz = kernels._link_extension(links, l, p)
         ax, ay, az = links.axis[l, 0], links.axis[l, 1], links.axis[l, 2]
         across = links.across[l]
         projection = (links.along[l] - across) * (ax * ux + ay * uy + az * uz)
         bx = across * ux + projection * ax
         by = across * uy + projection * ay
         bz = across * uz + projection * az
-        for k in range(4):
-            w = links.weight[l, k]
-            node = links.node[l, k]
-            out[node, 0] += w * bx
-            out[node, 1] += w * by
-            out[node, 2] += w * bz
+        kernels._link_spread(links, l, 1.0, bx, by, bz, out)
 
 
 @njit(**NUMBA_OPTIONS)
