@@ -322,28 +322,26 @@ def _bending_forces(model, xp, control, forces):
     links = forces.links
     for e in range(model.hinge.shape[0]):
         l = offset + e
-        for k in range(4):
-            node = model.hinge[e, k]
-            w = model.hinge_weight[e, k]
-            forces.stiffness[node] -= kb * w * w
-            links.node[l, k] = node
-            links.weight[l, k] = w
-        links.axis[l, 0] = 1.0
-        links.axis[l, 1] = 0.0
-        links.axis[l, 2] = 0.0
-        links.along[l] = kb
-        links.across[l] = kb
-        # w · U summed over the differences U = X - target, not as w · X - w · target: the
-        # weights reach 100 and the positions 10 cm, and the two sums would cancel to 1e-9
+        # the bend w · U summed over the differences U = X - target, not as w · X - w · target
+        # (``_link_extension`` twice): the weights reach 100 and the positions 10 cm, and the
+        # two sums would cancel to 1e-9
         bx = 0.0
         by = 0.0
         bz = 0.0
         for k in range(4):
             node = model.hinge[e, k]
             w = model.hinge_weight[e, k]
+            forces.stiffness[node] -= kb * w * w
+            links.node[l, k] = node
+            links.weight[l, k] = w
             bx += w * (xp[node, 0] - control.target[node, 0])
             by += w * (xp[node, 1] - control.target[node, 1])
             bz += w * (xp[node, 2] - control.target[node, 2])
+        links.axis[l, 0] = 1.0
+        links.axis[l, 1] = 0.0
+        links.axis[l, 2] = 0.0
+        links.along[l] = kb
+        links.across[l] = kb
         _link_spread(links, l, -kb, bx, by, bz, forces.force)  # F = -k_b w (w · U)
 
 

@@ -51,7 +51,7 @@ def solved_by(name: str, solver: str, **changes):
 
 def thesis_spec(name: str, solver: str = "quasi-implicit", **changes):
     """An expression of the library on the Hopper face, in the thesis's model (the
-    ``thesis`` material preset: no hypodermis, no bending), by the thesis's update unless
+    ``thesis`` material preset: no bending, the hypodermis kept), by the thesis's update unless
     ``solver`` says otherwise."""
     spec = facesim.load_spec(EXPRESSIONS / f"{name}.yaml")
     material = Material.model_validate({**spec.material.model_dump(exclude_unset=True), "preset": "thesis", "solver": solver})
