@@ -60,7 +60,7 @@ SUBSTEPS = {"implicit": 1, "quasi-implicit": 4}
 #: ``facesim`` is the defaults below.
 PRESETS = {
     "facesim": {},
-    "thesis": dict(solver="quasi-implicit", bending=0.0),
+    "thesis": dict(solver="quasi-implicit", bending=0.0, regions="moving"),
 }
 
 
@@ -69,7 +69,7 @@ class Material(Strict):
     a spec does not give (``PRESETS``); fields given win."""
 
     preset: Literal["facesim", "thesis"] = Field("facesim", description="facesim: the defaults below; thesis: the "
-                                                 "thesis's model (quasi-implicit update, no bending)")
+                                                 "thesis's model (quasi-implicit update, no bending, regions at the moving skin)")
     mass: float = Field(1.0, gt=0, description="point mass m of every vertex")
     stiffness: float = Field(1000.0, gt=0, description="spring stiffness k0, eq. 3.6 and 3.7")
     nonlinearity: float = Field(5.0, ge=0, description="spring non-linearity γ, eq. 3.6")
@@ -85,10 +85,13 @@ class Material(Strict):
     iterations: int = Field(60, ge=1, le=10000, description="most conjugate-gradient iterations per implicit step")
     tolerance: float = Field(1e-3, gt=0, lt=1, description="the implicit step's conjugate gradients stop when the "
                              "residual has fallen by this factor")
-    bending: float = Field(0.0, ge=0, description="bending stiffness k_b of the skin's displacement (kernels._bending_forces; "
+    bending: float = Field(60.0, ge=0, description="bending stiffness k_b of the skin's displacement (kernels._bending_forces; "
                            "not in the thesis, where it is 0)")
     edge_repulsion: bool = Field(True, description="edge repulsion (eq. 3.7); off reproduces the thesis's fig. 3.16")
     uv_projection: bool = Field(True, description="muscle forces in the 2D projection (eq. 3.21-3.25); off: in 3D")
+    regions: Literal["attached", "moving"] = Field(
+        "attached", description="where the muscles' falloff (eq. 3.2-3.4) and regions (section 3.3) are evaluated: "
+        "attached: where the bones hold the skin (kernels._muscle_forces); moving: at the moving skin, as the thesis")
 
     @model_validator(mode="before")
     @classmethod
@@ -96,6 +99,14 @@ class Material(Strict):
         if isinstance(data, dict) and data.get("preset") in PRESETS:
             return {**PRESETS[data["preset"]], **data}
         return data
+
+    @model_validator(mode="after")
+    def _bending_needs_the_whole_stiffness(self):
+        if self.solver == "quasi-implicit" and self.bending > 0:
+            raise ValueError("bending needs solver: implicit (the quasi-implicit update of eq. 3.19 keeps one stiffness "
+                             "per vertex, and a hinge's couples four: measured, happy runs away at bending 60 with 16 "
+                             "steps per frame); give bending: 0 with it, or preset: thesis")
+        return self
 
 
 @dataclass(frozen=True)
@@ -114,6 +125,7 @@ class Model:
     ring_start: np.ndarray  # (n+1,) one-ring triangles (i, ring_a, ring_b), counter-clockwise
     ring_a: np.ndarray  # (3t,)
     ring_b: np.ndarray  # (3t,)
+    ring_open: np.ndarray  # (n, 2) a boundary vertex's first and last one-ring triangles (its fan's two ends), else -1
     spring_indices: np.ndarray  # (s, 2)
     spring_rest_length: np.ndarray  # (s,)
     repulsion_vertex: np.ndarray  # (r,)
@@ -186,6 +198,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
     ring_start, order = csr_from_pairs(faces.reshape(-1), np.arange(3 * len(faces)), n)
     ring_a = np.stack([b, c, a], axis=1).reshape(-1)[order]
     ring_b = np.stack([c, a, b], axis=1).reshape(-1)[order]
+    ring_open = open_fans(ring_start, ring_a, ring_b)
 
     repulsion_vertex = faces.reshape(-1)
     repulsion_edge = np.stack([np.stack([b, c], 1), np.stack([c, a], 1), np.stack([a, b], 1)], axis=1).reshape(-1, 2)
@@ -211,6 +224,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         ring_start=ring_start,
         ring_a=ring_a,
         ring_b=ring_b,
+        ring_open=ring_open,
         spring_indices=edges,
         spring_rest_length=np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1),
         repulsion_vertex=repulsion_vertex,
@@ -240,6 +254,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         **{key: float(getattr(resolved, key)) for key in ("mass", "damping", "stiffness", "nonlinearity",
                                                            "repulsion_nonlinearity", "tissue", "drive", "bending")},
         length_unit=length_unit, edge_repulsion=bool(resolved.edge_repulsion), uv_projection=bool(resolved.uv_projection),
+        attached_regions=resolved.regions == "attached",
         implicit=resolved.solver == "implicit", iterations=int(resolved.iterations), tolerance=float(resolved.tolerance),
     )
 
@@ -261,6 +276,22 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         **arrays, **constants, material=resolved, muscles=muscles, rig=rig, scale=mesh.scale, resolution=resolution,
         length_unit=length_unit, mesh=mesh, arrays=kernel_arrays._replace(**falloffs),
     )
+
+
+def open_fans(ring_start: np.ndarray, ring_a: np.ndarray, ring_b: np.ndarray) -> np.ndarray:
+    """For each vertex whose one-ring is one open fan (a vertex on the boundary), the
+    ring triangles at its two ends: the first (i, a, b), whose a follows no other
+    triangle, and the last, whose b leads to none; -1 for a closed fan (or one in
+    several pieces, a vertex where boundaries touch)."""
+    n = len(ring_start) - 1
+    out = np.full((n, 2), -1, dtype=np.int64)
+    for i in range(n):
+        ring = np.arange(ring_start[i], ring_start[i + 1])
+        first = ring[~np.isin(ring_a[ring], ring_b[ring])]
+        last = ring[~np.isin(ring_b[ring], ring_a[ring])]
+        if len(first) == 1 and len(last) == 1:
+            out[i] = first[0], last[0]
+    return out
 
 
 #: The hinges' cotangents are clamped to this magnitude (angles of about 5.7 to 174 degrees):

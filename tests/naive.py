@@ -117,41 +117,72 @@ def region_of_influence(delta, insertion, edges, n):
     return np.flatnonzero(inside & (label == label[insertion]))
 
 
+def cross2(a, b):
+    return a[0] * b[1] - a[1] * b[0]
+
+
 def back_project(i, force_2d, uv, x, faces, edges):
     """Eq. 3.22-3.25 by the affine map of the one-ring triangle whose 2D wedge holds the
-    force; along the closest edge when none does."""
-    magnitude = np.linalg.norm(force_2d[:2])
+    force; on the boundary, along its two edges blended by the angle outside the mesh;
+    along the closest edge at a vertex whose projected ring folds over."""
+    f = force_2d[:2]
+    magnitude = np.linalg.norm(f)
+    ring = []
     for face in faces[(faces == i).any(axis=1)]:
         k = list(face).index(i)
-        a, b = face[(k + 1) % 3], face[(k + 2) % 3]
+        ring.append((face[(k + 1) % 3], face[(k + 2) % 3]))
+    for a, b in ring:
         basis = np.column_stack([uv[a, :2] - uv[i, :2], uv[b, :2] - uv[i, :2]])
         if abs(np.linalg.det(basis)) < 1e-12:
             continue
-        alpha, beta = np.linalg.solve(basis, force_2d[:2])
+        alpha, beta = np.linalg.solve(basis, f)
         if alpha >= 0 and beta >= 0:
             f3 = alpha * (x[a] - x[i]) + beta * (x[b] - x[i])
             return f3 * magnitude / np.linalg.norm(f3)
+
+    def unit(j):
+        return (x[j] - x[i]) / np.linalg.norm(x[j] - x[i])
+
+    def cosine(j):
+        e = uv[j, :2] - uv[i, :2]
+        return e @ f / (np.linalg.norm(e) * magnitude)
+
+    starts = [(a, b) for a, b in ring if a not in {b2 for _, b2 in ring}]
+    ends = [b for a, b in ring if b not in {a2 for a2, _ in ring}]
+    if len(starts) == 1 and len(ends) == 1:
+        (p, inner), q = starts[0], ends[0]
+        e_p, e_q, e_in = (uv[j, :2] - uv[i, :2] for j in (p, q, inner))
+        outward = -1.0 if cross2(e_p, e_in) > 0 else 1.0
+
+        def turn(a, b):
+            return np.arctan2(outward * cross2(a, b), a @ b) % (2 * np.pi)
+
+        gap, angle = turn(e_p, e_q), turn(e_p, f)
+        t = angle / gap if angle <= gap else float(angle - gap < 2 * np.pi - angle)
+        return magnitude * ((1 - t) * max(0.0, cosine(p)) * unit(p) + t * max(0.0, cosine(q)) * unit(q))
     neighbours = np.unique(np.concatenate([edges[edges[:, 0] == i, 1], edges[edges[:, 1] == i, 0]]))
-    directions = uv[neighbours, :2] - uv[i, :2]
-    cosine = directions @ force_2d[:2] / (np.linalg.norm(directions, axis=1) * magnitude)
-    best = np.argmax(cosine)
-    if cosine[best] <= 0:
-        return np.zeros(3)
-    edge = x[neighbours[best]] - x[i]
-    return edge / np.linalg.norm(edge) * cosine[best] * magnitude
+    best = max(neighbours, key=cosine)
+    return cosine(best) * magnitude * unit(best) if cosine(best) > 0 else np.zeros(3)
 
 
 def muscle_forces(model, xp, activation, target=None):
     """Eq. 3.1-3.4 on every vertex of every active muscle's region, the muscles' ends
-    where ``target`` (the bones' positions; rest by default) holds them."""
+    where ``target`` (the bones' positions; rest by default) holds them, δ and the
+    regions where it attaches the skin (or at the moving skin: ``regions: moving``)."""
     force = np.zeros_like(xp)
     use_uv = model.material.uv_projection
-    frame = project_uv(xp, model.axis_x, model.axis_z, model.radius) if use_uv else xp
-    origins, insertions = muscle_geometry(model, model.rest_position if target is None else target)
+    target = model.rest_position if target is None else target
+
+    def in_frame(x):
+        return project_uv(x, model.axis_x, model.axis_z, model.radius) if use_uv else x
+
+    frame = in_frame(xp)
+    attached = in_frame(target) if model.material.regions == "attached" else frame  # where δ is evaluated
+    origins, insertions = muscle_geometry(model, target)
     edges = model.spring_indices
     for m in np.flatnonzero(activation[:model.muscle_count]):
         origin = origins[m]
-        d = delta(model, m, frame, origins, insertions)
+        d = delta(model, m, attached, origins, insertions)
         for i in region_of_influence(d, model.muscle_insertion[m], edges, len(xp)):
             if model.pinned[i]:
                 continue
@@ -216,7 +247,7 @@ def step(model, x, v, activation, h):
         stiff, pull = stiff + s, pull + p
     if mat.bending:
         s, p = bending_terms(xp, target, model.hinge, model.hinge_weight, mat.bending)
-        stiff, pull = stiff + s, pull + p
+        stiff, pull = stiff + s, pull + p - h * s[:, None] * v  # eq. 3.19's form: each vertex's own term at X, not X*
     force = muscle_forces(model, xp, activation, target)
     denominator = np.maximum(mat.mass + h * mat.damping - h * h * stiff, mat.mass)
     v_new = (mat.mass * v + h * force + h * pull) / denominator[:, None]

@@ -10,6 +10,7 @@ from facesim.simulate import model_for
 from conftest import EXPRESSIONS
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
 from facesim.mesh import load_mesh, subdivide, write_obj
+from facesim.model import Material
 from facesim.muscles import MuscleFile, muscles_as_points
 from facesim.schema import load_model
 from facesim.spec import load_spec
@@ -43,7 +44,7 @@ def test_the_material_scales_with_the_skin_area_per_vertex(subdivided):
     s = fine.resolution
     assert fine.material.mass == pytest.approx(s) and fine.material.tissue == pytest.approx(300 * s)
     assert fine.material.substeps == 2 and fine.length_unit == pytest.approx(np.sqrt(s))
-    thesis = spec.material.model_copy(update=dict(solver="quasi-implicit"))
+    thesis = Material(preset="thesis")
     assert model_for(on(spec.with_overrides(material=thesis), subdivided)).material.substeps == 8
     assert fine.muscle_force.sum() == pytest.approx(s * default.muscle_force.sum())
 

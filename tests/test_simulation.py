@@ -161,7 +161,7 @@ def test_without_the_uv_projection_muscles_pull_the_skin_through_the_surface():
 
 
 def test_divergence_raises_with_the_frame():
-    violent = spec("happy", dt=0.5, material=material(solver="quasi-implicit", substeps=1))  # the thesis update, one 0.5 s step
+    violent = spec("happy", dt=0.5, material=material(preset="thesis", substeps=1))  # the thesis update, one 0.5 s step
     with pytest.raises(SimulationError, match=r"at frame \d+") as info:
         facesim.simulate(violent)
     assert info.value.frame is not None and info.value.frame < 35
