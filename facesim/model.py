@@ -186,9 +186,21 @@ def resolved_material(material: Material, resolution: float) -> Material:
     ))
 
 
+def over_muscle_file(material: Material, muscles: MuscleSet) -> Material:
+    """``material`` over the one the muscle file says its forces were set on
+    (``material:`` in the file): the fields ``material`` was given, and its preset's,
+    win. The Hopper face's file keeps the thesis's skin its forces were chosen on."""
+    if not muscles.material:
+        return material
+    given = material.model_dump(exclude_unset=True)
+    return Material.model_validate({**dict(muscles.material), **PRESETS[material.preset], **given})
+
+
 def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Material()) -> Model:
-    """The model of a face; ``material`` is per vertex of the default face and is scaled to
-    this mesh's resolution (``Model.material`` is the scaled one)."""
+    """The model of a face; ``material`` (over the muscle file's: ``over_muscle_file``) is
+    per vertex of the default face and is scaled to this mesh's resolution
+    (``Model.material`` is the scaled one)."""
+    material = over_muscle_file(material, muscles)
     x = mesh.vertices
     faces = mesh.faces
     edges = mesh.edges

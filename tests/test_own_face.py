@@ -10,7 +10,7 @@ from facesim.simulate import model_for
 from conftest import EXPRESSIONS
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
 from facesim.mesh import load_mesh, subdivide, write_obj
-from facesim.model import Material
+from facesim.model import Material, over_muscle_file
 from facesim.muscles import MuscleFile, muscles_as_points
 from facesim.schema import load_model
 from facesim.spec import load_spec
@@ -38,7 +38,7 @@ def on(spec, mesh_and_muscles):
 def test_the_material_scales_with_the_skin_area_per_vertex(subdivided):
     spec = load_spec(EXPRESSIONS / "sad.yaml").with_overrides(mesh=HOPPER_MESH)
     default = model_for(spec)
-    assert default.resolution == 1.0 and default.material == spec.material.model_copy(update=dict(substeps=1))
+    assert default.resolution == 1.0 and default.material == over_muscle_file(spec.material, default.muscles).model_copy(update=dict(substeps=1))
     fine = model_for(on(spec, subdivided))
     assert fine.vertex_count == 1790 and 0.2 < fine.resolution < 0.3
     s = fine.resolution

@@ -115,9 +115,10 @@ def test_settles_when_activations_are_held(name):
 
 def test_without_edge_repulsion_triangles_collapse_and_with_it_none_do():
     """Thesis fig. 3.16: without edge repulsion the mesh collapsed by step 12."""
-    strong = dict(onset=0)  # full activation from the first step
-    with_er = facesim.simulate(spec("happy", **strong), stop_on_inversion=False)
-    without = facesim.simulate(spec("happy", material=material(edge_repulsion=False), **strong), stop_on_inversion=False)
+    strong = dict(onset=0, mesh=HOPPER_MESH)  # full activation from the first step, the thesis's face and model
+    with_er = facesim.simulate(spec("happy", material=material(preset="thesis"), **strong), stop_on_inversion=False)
+    without = facesim.simulate(spec("happy", material=material(preset="thesis", edge_repulsion=False), **strong),
+                               stop_on_inversion=False)
     assert with_er.inverted.max() == 0
     first = int(np.argmax(without.inverted > 0))
     assert without.inverted.max() > 0
@@ -152,8 +153,8 @@ def depth_below_rest_surface(mesh, points):
 
 def test_without_the_uv_projection_muscles_pull_the_skin_through_the_surface():
     mesh = load_mesh(HOPPER_MESH)  # the thesis's figure 3.10, on the face of the thesis's scale
-    with_uv = facesim.simulate(spec("happy", mesh=HOPPER_MESH))
-    without = facesim.simulate(spec("happy", mesh=HOPPER_MESH, material=material(uv_projection=False)))
+    with_uv = facesim.simulate(spec("happy", mesh=HOPPER_MESH, material=material(preset="thesis")))
+    without = facesim.simulate(spec("happy", mesh=HOPPER_MESH, material=material(preset="thesis", uv_projection=False)))
     folded = depth_below_rest_surface(mesh, without.positions[-1])
     kept = depth_below_rest_surface(mesh, with_uv.positions[-1])
     assert folded.max() > 0.25 and (folded > 0.05).sum() >= 40
