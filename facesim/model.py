@@ -85,7 +85,7 @@ class Material(Strict):
     iterations: int = Field(60, ge=1, le=10000, description="most conjugate-gradient iterations per implicit step")
     tolerance: float = Field(1e-3, gt=0, lt=1, description="the implicit step's conjugate gradients stop when the "
                              "residual has fallen by this factor")
-    bending: float = Field(60.0, ge=0, description="bending stiffness k_b of the skin's displacement (kernels._bending_forces; "
+    bending: float = Field(100.0, ge=0, description="bending stiffness k_b of the skin's displacement (kernels._bending_forces; "
                            "not in the thesis, where it is 0)")
     edge_repulsion: bool = Field(True, description="edge repulsion (eq. 3.7); off reproduces the thesis's fig. 3.16")
     uv_projection: bool = Field(True, description="muscle forces in the 2D projection (eq. 3.21-3.25); off: in 3D")
