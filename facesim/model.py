@@ -125,7 +125,6 @@ class Model:
     ring_start: np.ndarray  # (n+1,) one-ring triangles (i, ring_a, ring_b), counter-clockwise
     ring_a: np.ndarray  # (3t,)
     ring_b: np.ndarray  # (3t,)
-    ring_open: np.ndarray  # (n, 2) a boundary vertex's first and last one-ring triangles (its fan's two ends), else -1
     spring_indices: np.ndarray  # (s, 2)
     spring_rest_length: np.ndarray  # (s,)
     repulsion_vertex: np.ndarray  # (r,)
@@ -210,7 +209,6 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
     ring_start, order = csr_from_pairs(faces.reshape(-1), np.arange(3 * len(faces)), n)
     ring_a = np.stack([b, c, a], axis=1).reshape(-1)[order]
     ring_b = np.stack([c, a, b], axis=1).reshape(-1)[order]
-    ring_open = open_fans(ring_start, ring_a, ring_b)
 
     repulsion_vertex = faces.reshape(-1)
     repulsion_edge = np.stack([np.stack([b, c], 1), np.stack([c, a], 1), np.stack([a, b], 1)], axis=1).reshape(-1, 2)
@@ -236,7 +234,6 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         ring_start=ring_start,
         ring_a=ring_a,
         ring_b=ring_b,
-        ring_open=ring_open,
         spring_indices=edges,
         spring_rest_length=np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1),
         repulsion_vertex=repulsion_vertex,
@@ -288,22 +285,6 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         **arrays, **constants, material=resolved, muscles=muscles, rig=rig, scale=mesh.scale, resolution=resolution,
         length_unit=length_unit, mesh=mesh, arrays=kernel_arrays._replace(**falloffs),
     )
-
-
-def open_fans(ring_start: np.ndarray, ring_a: np.ndarray, ring_b: np.ndarray) -> np.ndarray:
-    """For each vertex whose one-ring is one open fan (a vertex on the boundary), the
-    ring triangles at its two ends: the first (i, a, b), whose a follows no other
-    triangle, and the last, whose b leads to none; -1 for a closed fan (or one in
-    several pieces, a vertex where boundaries touch)."""
-    n = len(ring_start) - 1
-    out = np.full((n, 2), -1, dtype=np.int64)
-    for i in range(n):
-        ring = np.arange(ring_start[i], ring_start[i + 1])
-        first = ring[~np.isin(ring_a[ring], ring_b[ring])]
-        last = ring[~np.isin(ring_b[ring], ring_a[ring])]
-        if len(first) == 1 and len(last) == 1:
-            out[i] = first[0], last[0]
-    return out
 
 
 #: The hinges' cotangents are clamped to this magnitude (angles of about 5.7 to 174 degrees):

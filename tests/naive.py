@@ -117,52 +117,42 @@ def region_of_influence(delta, insertion, edges, n):
     return np.flatnonzero(inside & (label == label[insertion]))
 
 
-def cross2(a, b):
-    return a[0] * b[1] - a[1] * b[0]
-
-
 def back_project(i, force_2d, uv, x, faces, edges):
-    """Eq. 3.22-3.25 by the affine map of the one-ring triangle whose 2D wedge holds the
-    force; on the boundary, along its two edges blended by the angle outside the mesh;
-    along the closest edge at a vertex whose projected ring folds over."""
+    """Eq. 3.22-3.25 by the affine map of each one-ring triangle whose 2D wedge holds the
+    force, their unit directions averaged with weights sin φ sin(θ - φ) (f at angle φ in a
+    wedge of angle θ; one wedge unless the ring folds); a force no wedge holds goes along the edges nearest it on either side,
+    blended by the angle between them."""
     f = force_2d[:2]
     magnitude = np.linalg.norm(f)
-    ring = []
+    if magnitude == 0:
+        return np.zeros(3)
+    total = np.zeros(3)
     for face in faces[(faces == i).any(axis=1)]:
         k = list(face).index(i)
-        ring.append((face[(k + 1) % 3], face[(k + 2) % 3]))
-    for a, b in ring:
+        a, b = face[(k + 1) % 3], face[(k + 2) % 3]
         basis = np.column_stack([uv[a, :2] - uv[i, :2], uv[b, :2] - uv[i, :2]])
         if abs(np.linalg.det(basis)) < 1e-12:
             continue
         alpha, beta = np.linalg.solve(basis, f)
         if alpha >= 0 and beta >= 0:
             f3 = alpha * (x[a] - x[i]) + beta * (x[b] - x[i])
-            return f3 * magnitude / np.linalg.norm(f3)
+            weight = alpha * beta * np.linalg.det(basis) ** 2 / (np.prod(np.linalg.norm(basis, axis=0)) * magnitude**2)
+            total += weight * f3 / np.linalg.norm(f3)
+    if np.linalg.norm(total) > 0:
+        return total * magnitude / np.linalg.norm(total)
 
-    def unit(j):
-        return (x[j] - x[i]) / np.linalg.norm(x[j] - x[i])
-
-    def cosine(j):
-        e = uv[j, :2] - uv[i, :2]
-        return e @ f / (np.linalg.norm(e) * magnitude)
-
-    starts = [(a, b) for a, b in ring if a not in {b2 for _, b2 in ring}]
-    ends = [b for a, b in ring if b not in {a2 for a2, _ in ring}]
-    if len(starts) == 1 and len(ends) == 1:
-        (p, inner), q = starts[0], ends[0]
-        e_p, e_q, e_in = (uv[j, :2] - uv[i, :2] for j in (p, q, inner))
-        outward = -1.0 if cross2(e_p, e_in) > 0 else 1.0
-
-        def turn(a, b):
-            return np.arctan2(outward * cross2(a, b), a @ b) % (2 * np.pi)
-
-        gap, angle = turn(e_p, e_q), turn(e_p, f)
-        t = angle / gap if angle <= gap else float(angle - gap < 2 * np.pi - angle)
-        return magnitude * ((1 - t) * max(0.0, cosine(p)) * unit(p) + t * max(0.0, cosine(q)) * unit(q))
     neighbours = np.unique(np.concatenate([edges[edges[:, 0] == i, 1], edges[edges[:, 1] == i, 0]]))
-    best = max(neighbours, key=cosine)
-    return cosine(best) * magnitude * unit(best) if cosine(best) > 0 else np.zeros(3)
+    angle = {j: np.arctan2(*(uv[j, :2] - uv[i, :2])[::-1]) - np.arctan2(f[1], f[0]) for j in neighbours}
+    to_q = {j: a % (2 * np.pi) for j, a in angle.items()}  # counter-clockwise from f to the edge
+    from_p = {j: -a % (2 * np.pi) for j, a in angle.items()}  # counter-clockwise from the edge to f
+    q, p = min(to_q, key=to_q.get), min(from_p, key=from_p.get)
+    t = from_p[p] / (from_p[p] + to_q[q]) if from_p[p] + to_q[q] > 0 else 0.0
+
+    def kept(j):
+        e = uv[j, :2] - uv[i, :2]
+        return max(0.0, e @ f / (np.linalg.norm(e) * magnitude)) * magnitude * (x[j] - x[i]) / np.linalg.norm(x[j] - x[i])
+
+    return (1 - t) * kept(p) + t * kept(q)
 
 
 def muscle_forces(model, xp, activation, target=None):
