@@ -40,7 +40,7 @@ CHECKS = {
               ["depressor_anguli_oris", "procerus"]),
     "fear": (lambda r, f: min(lift(r, f, i) for i in BROWS[:2]) > 0.1
              and np.linalg.norm(f[107] - f[336]) < np.linalg.norm(r[107] - r[336]) - 0.03,
-             ["frontalis_medial", "frontalis_lateral", "corrugator_supercilii"]),
+             ["frontalis", "corrugator_supercilii"]),
     "disgust": (lambda r, f: lift(r, f, UPPER_LIP[0]) - lift(r, f, UPPER_LIP[1]) > 0.1,
                 ["levator_labii_superioris"]),
     "disgusted_anger": (lambda r, f: lift(r, f, GLABELLA) < -0.1 and min(lift(r, f, i) for i in UPPER_LIP) > 0.05,
