@@ -201,20 +201,21 @@ def solvers(repeats: int, names: list[str]) -> tuple[str, dict]:
     head with and without the skin's bending; how far apart the held apexes are."""
     figures = {}
 
-    def warm_ms(spec):
+    def warm_ms(spec, stop_on_inversion=True):
         model = model_for(spec)
         table_ = activation_table(spec, model.muscles)
-        run(model, table_, spec.dt)
-        return median(timed(lambda: run(model, table_, spec.dt), 3 * repeats)) * 1e3, model.material.substeps
+        run(model, table_, spec.dt, stop_on_inversion)
+        return median(timed(lambda: run(model, table_, spec.dt, stop_on_inversion), 3 * repeats)) * 1e3, model.material.substeps
 
     (slow, slow_steps), (fast, fast_steps) = (warm_ms(thesis_spec("happy", solver)) for solver in ("quasi-implicit", "implicit"))
     figures["the Hopper face"] = dict(quasi=slow, implicit=fast)
     text = table(["happy, 35 frames, warm, the thesis's model", "quasi-implicit, ms (steps per frame)",
                   "implicit, ms (steps per frame)", "ratio"],
                  [["the Hopper face", f"{slow:.2f} ({slow_steps})", f"{fast:.2f} ({fast_steps})", f"{slow / fast:.2f}x"]])
-    (flat, _), (bent, _) = (warm_ms(solved_by("happy", bending=kb)) for kb in (0.0, Material().bending))
+    # without bending the calibrated smile folds at frame 4: timed all the same (the same steps), not stopped
+    (flat, _), (bent, _) = (warm_ms(solved_by("happy", bending=kb), stop_on_inversion=False) for kb in (0.0, Material().bending))
     figures["the default head"] = dict(implicit=bent, no_bending=flat)
-    text += "\n\n" + table(["happy, 35 frames, warm, implicit, one step per frame", "without bending, ms",
+    text += "\n\n" + table(["happy, 35 frames, warm, implicit, one step per frame", "without bending (folds at frame 4), ms",
                               f"with bending (k_b = {Material().bending:g}, the default), ms", "ratio"],
                              [["the default head", f"{flat:.2f}", f"{bent:.2f}", f"{bent / flat:.2f}x"]])
     apex_rows = []
