@@ -10,6 +10,7 @@ import pytest
 
 from conftest import THESIS_EXPRESSIONS, spec
 from facesim.config import HEAD, HEAD_MUSCLES
+from facesim.errors import InputError
 from facesim.head import load_head
 from facesim.render import FaceRenderer, RenderSettings
 from facesim.simulate import figure_for, simulate
@@ -93,6 +94,21 @@ needs_mediapipe = pytest.mark.skipif(importlib.util.find_spec("mediapipe") is No
                                      reason="MediaPipe not installed (pip install -e '.[photo]')")
 #: MediaPipe's mouth corners, outer eye corners, nose tip and chin.
 FEATURES = {"mouth corners": [61, 291], "outer eye corners": [33, 263], "nose tip": [1], "chin": [152]}
+
+
+def test_the_face_framing_fills_the_frame_with_the_face():
+    """--framing face (the default on a head) draws the face from brow to chin across the
+    frame, where expressions are read; --framing head keeps head and shoulders."""
+    neutral = simulate(spec("happy", activations={}, frames=1))
+    head = neutral.model.mesh.head
+    eyes = head.landmark_positions[[33, 263]]  # outer eye corners
+    width = {}
+    for framing in ("face", "head"):
+        with FaceRenderer.of(neutral, RenderSettings(256, 256, framing=framing)) as renderer:
+            width[framing] = np.linalg.norm(np.subtract(*renderer.project(eyes))) / 256
+    assert width["face"] > 0.35 and width["face"] > 1.6 * width["head"]
+    with pytest.raises(InputError, match=r"--framing: expected one of face, head, got 'torso'"):
+        RenderSettings(framing="torso")
 
 
 @needs_mediapipe
