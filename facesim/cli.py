@@ -51,11 +51,12 @@ def handled(command):
     return wrapper
 
 
-def settings_from(size: str, camera: str, wireframe: bool = False, show_muscles: bool = False, antialias: bool = True):
+def settings_from(size: str, camera: str, wireframe: bool = False, show_muscles: bool = False, antialias: bool = True,
+                  framing: str = "face"):
     from .render import RenderSettings, parse_size
 
     width, height = parse_size(size)
-    return RenderSettings(width, height, camera, wireframe, show_muscles, antialias)
+    return RenderSettings(width, height, camera, wireframe, show_muscles, antialias, framing)
 
 
 def positive(value: Optional[int], name: str) -> None:
@@ -68,6 +69,7 @@ THESIS_ORDER = ("angry", "disgust", "fear", "happy", "sad", "surprise", "disgust
 
 SIZE = typer.Option("512x512", "--size", help="frame size WxH")
 CAMERA = typer.Option("front", "--camera", help="front, three-quarter or profile")
+FRAMING = typer.Option("face", "--framing", help="a head's frame: face (brow to chin) or head (head and shoulders)")
 BACKEND = typer.Option("auto", "--backend", help="OpenGL platform: auto (EGL, then OSMesa), egl or osmesa")
 ANTIALIAS = typer.Option(True, "--antialias/--no-antialias", help="4 samples per pixel, by supersampling (off: about 40% faster)")
 FORCE = typer.Option(False, "--force", help="overwrite an existing output")
@@ -91,6 +93,7 @@ def render(
     size: str = SIZE,
     fps: Optional[float] = typer.Option(None, "--fps", help="playback rate (default: the spec's, 25)"),
     camera: str = CAMERA,
+    framing: str = FRAMING,
     backend: str = BACKEND,
     wireframe: bool = typer.Option(False, "--wireframe", help="draw the mesh as wireframe"),
     show_muscles: bool = typer.Option(False, "--show-muscles", help="draw muscle forces as red arrows"),
@@ -111,7 +114,7 @@ def render(
     jobs = capped_jobs(jobs, notice)
     if fps is not None and not 0 < fps <= 240:
         raise InputError(f"--fps: must be between 0 and 240, got {fps}")
-    settings = settings_from(size, camera, wireframe, show_muscles, antialias)
+    settings = settings_from(size, camera, wireframe, show_muscles, antialias, framing)
     if spec is None and blend is None:
         raise InputError("render: give a SPEC file, --blend, or both")
     loaded = load_spec(spec) if spec else blend_spec(blend)
@@ -137,6 +140,7 @@ def batch(
     fmt: str = typer.Option("mp4", "--format", help="mp4, gif, npz or png (a directory per spec)"),
     size: str = SIZE,
     camera: str = CAMERA,
+    framing: str = FRAMING,
     backend: str = BACKEND,
     antialias: bool = ANTIALIAS,
     force: bool = FORCE,
@@ -161,7 +165,7 @@ def batch(
     suffix = {"mp4": ".mp4", "gif": ".gif", "npz": ".npz", "png": ""}.get(fmt)
     if suffix is None:
         raise InputError(f"--format: expected mp4, gif, npz or png, got {fmt!r}")
-    settings = settings_from(size, camera, antialias=antialias)
+    settings = settings_from(size, camera, antialias=antialias, framing=framing)
     specs = collect_specs(inputs)
     if outdir.exists() and not outdir.is_dir():
         raise InputError(f"{outdir}: is not a directory")
@@ -280,6 +284,7 @@ def sheet(
     inputs: list[Path] = typer.Argument(..., help="expression specs or directories of them"),
     output: Path = typer.Option(..., "-o", "--output", help="PNG to write"),
     size: str = typer.Option("384x384", "--size", help="size of each face"),
+    framing: str = FRAMING,
     backend: str = BACKEND,
     force: bool = FORCE,
     columns: int = typer.Option(3, "--columns"),
@@ -316,7 +321,7 @@ def sheet(
     if not done:
         raise SimulationError(failures[0])
     first = done[0]
-    settings = settings_from(size, "front")
+    settings = settings_from(size, "front", framing=framing)
     blank = np.full((settings.height, settings.width, 3), np.array(BACKGROUND[:3]) * 255, dtype=np.uint8)
     images, labels = [], ["neutral"]
     with FaceRenderer.of(first, settings, backend) as renderer:

@@ -47,7 +47,7 @@ ModelArrays = namedtuple("ModelArrays", [
     "jaw_column", "jaw_weight", "jaw_hinge", "jaw_axis", "jaw_max", "lid_column", "lid_centre", "lid_delta",
     "drive_column", "drive_weight", "contact_upper", "contact_lower", "contact_gap",
     "mass", "damping", "stiffness", "nonlinearity", "repulsion_nonlinearity", "length_unit", "tissue", "drive",
-    "bending", "edge_repulsion", "uv_projection", "implicit", "iterations", "tolerance",
+    "bending", "edge_repulsion", "uv_projection", "attached_regions", "implicit", "iterations", "tolerance",
 ])
 #: What a step reads and advances: positions x and velocities v, (n, 3) each.
 State = namedtuple("State", ["x", "v"])
@@ -72,11 +72,11 @@ Links = namedtuple("Links", ["node", "weight", "axis", "along", "across", "diago
 Forces = namedtuple("Forces", ["force", "stiffness", "damping", "links"])
 #: Scratch arrays of the muscle terms: the points in the muscles' frame (n, 3), the flood
 #: fill's marks, stack, region and δ (n,), and the mark of the latest fill (1,).
-Workspace = namedtuple("Workspace", ["frame", "visited", "stack", "region", "delta", "stamp"])
+Workspace = namedtuple("Workspace", ["frame", "attached", "visited", "stack", "region", "delta", "stamp"])
 
 
 def workspace(n: int) -> Workspace:
-    return Workspace(np.empty((n, 3)), np.zeros(n, dtype=np.int64), np.empty(n, dtype=np.int64),
+    return Workspace(np.empty((n, 3)), np.empty((n, 3)), np.zeros(n, dtype=np.int64), np.empty(n, dtype=np.int64),
                      np.empty(n, dtype=np.int64), np.empty(n), np.zeros(1, dtype=np.int64))
 
 
@@ -395,15 +395,21 @@ def _delta(model, m, origin, insertion_point, px, py, pz):
 
 
 @njit(**NUMBA_OPTIONS)
-def _back_project(i, fu, fv, uv, xp, neighbour_start, neighbour_index, ring_start, ring_a, ring_b, out):
+def _back_project(model, i, fu, fv, uv, xp, out):
     """Eq. 3.22-3.25: carry the 2D force (fu, fv) at vertex i onto the mesh.
 
     The one-ring triangle (i, a, b) whose 2D wedge contains the force is found by writing
     the force in the basis of its two 2D edges, f = α e_a + β e_b with α, β ≥ 0; the same
     combination of the 3D edges lies in the triangle's plane and projects to a vector
-    parallel to f. Its length is set to |f|. A force that leaves the mesh (a vertex on a
-    boundary pulled outward) keeps only its component along the boundary edge closest in
-    direction. Returns False, leaving ``out`` zero, when no edge points along it.
+    parallel to f. Its length is set to |f|. Where the projected one-ring folds (the lips'
+    rolled edge, beside the nose), several wedges hold the force: their directions are
+    averaged with the weight sin φ sin(θ - φ) = α β det² / (|f|² |e_a| |e_b|), f at angle
+    φ in a wedge of angle θ, which vanishes on a wedge's edges and stays small in a
+    sliver, so the result turns continuously with the force and does not depend
+    on which triangle the ring lists first (taking the first made mirror-image vertices
+    pull differently: 4e-3 of the depressor labii's force at the upper lip). A force no
+    wedge holds leaves the mesh (``_between_edges``). Returns False, leaving ``out``
+    zero, when nothing of it is kept.
     """
     out[0] = 0.0
     out[1] = 0.0
@@ -411,9 +417,10 @@ def _back_project(i, fu, fv, uv, xp, neighbour_start, neighbour_index, ring_star
     magnitude = math.sqrt(fu * fu + fv * fv)
     if magnitude == 0.0:
         return False
-    for k in range(ring_start[i], ring_start[i + 1]):
-        a = ring_a[k]
-        b = ring_b[k]
+    g = np.empty(3)
+    for k in range(model.ring_start[i], model.ring_start[i + 1]):
+        a = model.ring_a[k]
+        b = model.ring_b[k]
         au = uv[a, 0] - uv[i, 0]
         av = uv[a, 1] - uv[i, 1]
         bu = uv[b, 0] - uv[i, 0]
@@ -423,45 +430,91 @@ def _back_project(i, fu, fv, uv, xp, neighbour_start, neighbour_index, ring_star
             continue
         alpha = (fu * bv - fv * bu) / det
         beta = (au * fv - av * fu) / det
-        if alpha >= 0.0 and beta >= 0.0:
-            for d in range(3):
-                out[d] = alpha * (xp[a, d] - xp[i, d]) + beta * (xp[b, d] - xp[i, d])
-            scale = magnitude / max(math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2), LENGTH_EPS)
-            for d in range(3):
-                out[d] *= scale
-            return True
-    best = 0.0
-    best_j = -1
-    for k in range(neighbour_start[i], neighbour_start[i + 1]):
-        j = neighbour_index[k]
-        eu = uv[j, 0] - uv[i, 0]
-        ev = uv[j, 1] - uv[i, 1]
-        cosine = (eu * fu + ev * fv) / max(math.sqrt(eu * eu + ev * ev) * magnitude, LENGTH_EPS)
-        if cosine > best:
-            best = cosine
-            best_j = j
-    if best_j < 0:
-        return False
-    length = 0.0
-    for d in range(3):
-        out[d] = xp[best_j, d] - xp[i, d]
-        length += out[d] ** 2
-    scale = best * magnitude / max(math.sqrt(length), LENGTH_EPS)
-    for d in range(3):
-        out[d] *= scale
-    return True
+        if alpha < 0.0 or beta < 0.0:
+            continue
+        for d in range(3):
+            g[d] = alpha * (xp[a, d] - xp[i, d]) + beta * (xp[b, d] - xp[i, d])
+        weight = alpha * beta * det * det / (magnitude * magnitude * math.sqrt((au * au + av * av) * (bu * bu + bv * bv)))
+        scale = weight / max(math.sqrt(g[0] ** 2 + g[1] ** 2 + g[2] ** 2), LENGTH_EPS)
+        for d in range(3):
+            out[d] += scale * g[d]
+    norm = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2)
+    if norm > 0.0:
+        for d in range(3):
+            out[d] *= magnitude / norm
+        return True
+    return _between_edges(model, i, fu, fv, uv, xp, out)  # no wedge, or exactly along an edge
 
 
 @njit(**NUMBA_OPTIONS)
-def _region_of_influence(model, m, origin, insertion_point, work):
-    """The stack-based flood fill of section 3.3 for muscle m, over the points
-    ``work.frame``: start at the insertion, pop a vertex, evaluate its δ (eq. 3.4), and
+def _between_edges(model, i, fu, fv, uv, xp, out):
+    """A force f at vertex i that no 2D wedge holds (it leaves the mesh at the boundary,
+    or points into the gap of a folded one-ring), between the edges nearest it on either
+    side, e_p clockwise and e_q counter-clockwise (2D): kept as
+    |f| ((1 - t) max(0, cos(f, e_p)) Ê_p + t max(0, cos(f, e_q)) Ê_q) along the 3D edges'
+    directions Ê, t running from 0 at e_p to 1 at e_q with the angle. It meets the
+    wedges' rule on both edges and changes continuously in between: taking only the
+    closer edge flips between the two as the vertex moves, and a lip pulled outward
+    rattled between them (measured: a period-2 cycle of 0.3 mm a frame at the inner
+    lower lip under AU12)."""
+    to_q = 2.0 * math.pi
+    from_p = 2.0 * math.pi
+    p = -1
+    q = -1
+    for k in range(model.neighbour_start[i], model.neighbour_start[i + 1]):
+        j = model.neighbour_index[k]
+        eu = uv[j, 0] - uv[i, 0]
+        ev = uv[j, 1] - uv[i, 1]
+        turn = _turn(fu, fv, eu, ev)
+        if turn < to_q:
+            to_q = turn
+            q = j
+        turn = _turn(eu, ev, fu, fv)
+        if turn < from_p:
+            from_p = turn
+            p = j
+    if p < 0:
+        return False
+    t = from_p / max(from_p + to_q, LENGTH_EPS)
+    magnitude = math.sqrt(fu * fu + fv * fv)
+    kept_p = (1.0 - t) * max(0.0, _cosine(uv[p, 0] - uv[i, 0], uv[p, 1] - uv[i, 1], fu, fv)) * magnitude
+    kept_q = t * max(0.0, _cosine(uv[q, 0] - uv[i, 0], uv[q, 1] - uv[i, 1], fu, fv)) * magnitude
+    _add_along_edge(xp, i, p, kept_p, out)
+    _add_along_edge(xp, i, q, kept_q, out)
+    return kept_p > 0.0 or kept_q > 0.0
+
+
+@njit(**NUMBA_OPTIONS)
+def _cosine(au, av, bu, bv):
+    return (au * bu + av * bv) / max(math.sqrt((au * au + av * av) * (bu * bu + bv * bv)), LENGTH_EPS)
+
+
+@njit(**NUMBA_OPTIONS)
+def _turn(au, av, bu, bv):
+    """The angle from 2D vector a to b turning counter-clockwise, in [0, 2π)."""
+    angle = math.atan2(au * bv - av * bu, au * bu + av * bv)
+    return angle + 2.0 * math.pi if angle < 0.0 else angle
+
+
+@njit(**NUMBA_OPTIONS)
+def _add_along_edge(xp, i, j, length, out):
+    """out += ``length`` along the unit 3D edge from vertex i to j."""
+    norm = math.sqrt((xp[j, 0] - xp[i, 0]) ** 2 + (xp[j, 1] - xp[i, 1]) ** 2 + (xp[j, 2] - xp[i, 2]) ** 2)
+    scale = length / max(norm, LENGTH_EPS)
+    for d in range(3):
+        out[d] += scale * (xp[j, d] - xp[i, d])
+
+
+@njit(**NUMBA_OPTIONS)
+def _region_of_influence(model, m, origin, insertion_point, points, work):
+    """The stack-based flood fill of section 3.3 for muscle m, over ``points`` (in the
+    muscles' frame): start at the insertion, pop a vertex, evaluate its δ (eq. 3.4), and
     push its neighbours only when δ is not negligible. Writes the region's vertices and
     their δ into ``work.region`` and ``work.delta`` and returns how many there are; a new
     ``work.stamp`` marks the vertices pushed."""
     work.stamp[0] += 1
     stamp = work.stamp[0]
-    frame, visited, stack = work.frame, work.visited, work.stack
+    visited, stack = work.visited, work.stack
     start = model.muscle_insertion[m]
     count = 0
     top = 0
@@ -470,7 +523,7 @@ def _region_of_influence(model, m, origin, insertion_point, work):
     while top >= 0:
         i = stack[top]
         top -= 1
-        d = _delta(model, m, origin, insertion_point, frame[i, 0], frame[i, 1], frame[i, 2])
+        d = _delta(model, m, origin, insertion_point, points[i, 0], points[i, 1], points[i, 2])
         if d <= NEGLIGIBLE_DELTA:
             continue
         work.region[count] = i
@@ -500,15 +553,27 @@ def _muscle_forces(model, xp, control, work, forces):
     the attachment O of a linear muscle, toward the centre of a sphincter, with O and I
     where the bones hold them (``control``). In the 2D projection of eq. 3.21 when
     ``uv_projection``, the forces then back-projected onto the mesh (eq. 3.22-3.25); else
-    in 3D. Muscle forces do not depend on the skin's velocity and add no stiffness."""
+    in 3D. Muscle forces do not depend on the skin's velocity and add no stiffness.
+
+    The falloff δ (eq. 3.2-3.4) and the flood fill's region are evaluated where the skin
+    is attached (``attached_regions``: where the bones hold it, ``control.target``), not
+    where it has moved: a muscle pulls the same patch of skin however far it carries it.
+    The thesis evaluates them at the moving skin, so a lip drawn toward one side's
+    muscles falls deeper into their falloff and is pulled harder still; at the forces of
+    a full smile that feedback outweighs the skin and the mouth slides sideways (measured:
+    happy held, the lower lip 1 cm off the midline from a 1e-16 asymmetry).
+    ``regions: moving`` in the material keeps the thesis's form."""
     _muscle_frame(model, xp, work.frame)
     frame = work.frame
+    if model.attached_regions:
+        _muscle_frame(model, control.target, work.attached)
+    points = work.attached if model.attached_regions else frame
     f3 = np.empty(3)
     for m in range(model.muscle_kind.shape[0]):
         a_m = control.activation[m]
         if a_m == 0.0:
             continue
-        count = _region_of_influence(model, m, control.origin, control.insertion_point, work)
+        count = _region_of_influence(model, m, control.origin, control.insertion_point, points, work)
         for k in range(count):
             i = work.region[k]
             if model.pinned[i]:
@@ -519,8 +584,7 @@ def _muscle_forces(model, xp, control, work, forces):
                 length += f3[d] ** 2
             scale = a_m * model.muscle_force[m] * work.delta[k] / max(math.sqrt(length), LENGTH_EPS)  # eq. 3.1
             if model.uv_projection:
-                _back_project(i, scale * f3[0], scale * f3[1], frame, xp, model.neighbour_start,
-                              model.neighbour_index, model.ring_start, model.ring_a, model.ring_b, f3)
+                _back_project(model, i, scale * f3[0], scale * f3[1], frame, xp, f3)
             else:
                 for d in range(3):
                     f3[d] *= scale

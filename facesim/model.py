@@ -60,7 +60,7 @@ SUBSTEPS = {"implicit": 1, "quasi-implicit": 4}
 #: ``facesim`` is the defaults below.
 PRESETS = {
     "facesim": {},
-    "thesis": dict(solver="quasi-implicit", bending=0.0),
+    "thesis": dict(solver="quasi-implicit", bending=0.0, regions="moving"),
 }
 
 
@@ -69,7 +69,7 @@ class Material(Strict):
     a spec does not give (``PRESETS``); fields given win."""
 
     preset: Literal["facesim", "thesis"] = Field("facesim", description="facesim: the defaults below; thesis: the "
-                                                 "thesis's model (quasi-implicit update, no bending)")
+                                                 "thesis's model (quasi-implicit update, no bending, regions at the moving skin)")
     mass: float = Field(1.0, gt=0, description="point mass m of every vertex")
     stiffness: float = Field(1000.0, gt=0, description="spring stiffness k0, eq. 3.6 and 3.7")
     nonlinearity: float = Field(5.0, ge=0, description="spring non-linearity γ, eq. 3.6")
@@ -85,10 +85,13 @@ class Material(Strict):
     iterations: int = Field(60, ge=1, le=10000, description="most conjugate-gradient iterations per implicit step")
     tolerance: float = Field(1e-3, gt=0, lt=1, description="the implicit step's conjugate gradients stop when the "
                              "residual has fallen by this factor")
-    bending: float = Field(0.0, ge=0, description="bending stiffness k_b of the skin's displacement (kernels._bending_forces; "
+    bending: float = Field(100.0, ge=0, description="bending stiffness k_b of the skin's displacement (kernels._bending_forces; "
                            "not in the thesis, where it is 0)")
     edge_repulsion: bool = Field(True, description="edge repulsion (eq. 3.7); off reproduces the thesis's fig. 3.16")
     uv_projection: bool = Field(True, description="muscle forces in the 2D projection (eq. 3.21-3.25); off: in 3D")
+    regions: Literal["attached", "moving"] = Field(
+        "attached", description="where the muscles' falloff (eq. 3.2-3.4) and regions (section 3.3) are evaluated: "
+        "attached: where the bones hold the skin (kernels._muscle_forces); moving: at the moving skin, as the thesis")
 
     @model_validator(mode="before")
     @classmethod
@@ -96,6 +99,14 @@ class Material(Strict):
         if isinstance(data, dict) and data.get("preset") in PRESETS:
             return {**PRESETS[data["preset"]], **data}
         return data
+
+    @model_validator(mode="after")
+    def _bending_needs_the_whole_stiffness(self):
+        if self.solver == "quasi-implicit" and self.bending > 0:
+            raise ValueError("bending needs solver: implicit (the quasi-implicit update of eq. 3.19 keeps one stiffness "
+                             "per vertex, and a hinge's couples four: measured, happy runs away at bending 60 with 16 "
+                             "steps per frame); give bending: 0 with it, or preset: thesis")
+        return self
 
 
 @dataclass(frozen=True)
@@ -174,9 +185,21 @@ def resolved_material(material: Material, resolution: float) -> Material:
     ))
 
 
+def over_muscle_file(material: Material, muscles: MuscleSet) -> Material:
+    """``material`` over the one the muscle file says its forces were set on
+    (``material:`` in the file): the fields ``material`` was given, and its preset's,
+    win. The Hopper face's file keeps the thesis's skin its forces were chosen on."""
+    if not muscles.material:
+        return material
+    given = material.model_dump(exclude_unset=True)
+    return Material.model_validate({**dict(muscles.material), **PRESETS[material.preset], **given})
+
+
 def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Material()) -> Model:
-    """The model of a face; ``material`` is per vertex of the default face and is scaled to
-    this mesh's resolution (``Model.material`` is the scaled one)."""
+    """The model of a face; ``material`` (over the muscle file's: ``over_muscle_file``) is
+    per vertex of the default face and is scaled to this mesh's resolution
+    (``Model.material`` is the scaled one)."""
+    material = over_muscle_file(material, muscles)
     x = mesh.vertices
     faces = mesh.faces
     edges = mesh.edges
@@ -240,6 +263,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         **{key: float(getattr(resolved, key)) for key in ("mass", "damping", "stiffness", "nonlinearity",
                                                            "repulsion_nonlinearity", "tissue", "drive", "bending")},
         length_unit=length_unit, edge_repulsion=bool(resolved.edge_repulsion), uv_projection=bool(resolved.uv_projection),
+        attached_regions=resolved.regions == "attached",
         implicit=resolved.solver == "implicit", iterations=int(resolved.iterations), tolerance=float(resolved.tolerance),
     )
 

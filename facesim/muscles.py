@@ -28,7 +28,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 import numpy as np
 from pydantic import Field, StrictInt, field_validator, model_validator
@@ -135,6 +135,8 @@ class Pinned(Strict):
 
 class MuscleFile(Strict):
     units: Literal["cm"] = "cm"
+    material: dict[str, Any] = Field({}, description="the material (facesim.model.Material's fields) the forces were "
+                                     "set on; a spec's material and its preset win over it")
     defaults: MuscleDefaults = MuscleDefaults()
     pinned: Pinned = Pinned()
     muscles: list[Annotated[Union[MuscleEntry, SphincterEntry], Field(discriminator="kind")]]
@@ -208,6 +210,7 @@ class MuscleSet:
     jaw: JawRig | None = None
     eyelids: tuple[EyelidRig, ...] = ()
     source: str = ""
+    material: tuple[tuple[str, Any], ...] = ()  # the file's material fields (MuscleFile.material)
 
     @property
     def count(self) -> int:
@@ -303,6 +306,10 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         if not mesh.boundary_loops:
             raise InputError(f"{source}: pinned: the mesh has no boundary to pin (a closed head?)")
         pinned |= set(mesh.boundary_loops[0].tolist())
+    for m, k, i in zip(spec.muscles, kind, insertion):
+        if k == LINEAR and i in pinned:
+            raise InputError(f"{source}: muscle {m.name}: insertion: vertex {i} is pinned (the rim, or an attachment) "
+                             "and would never move; expected a vertex of free skin")
     jaw, controls = None, []
     if spec.jaw is not None:
         where = f"{source}: jaw"
@@ -341,7 +348,22 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         jaw=jaw,
         eyelids=tuple(eyelids),
         source=source,
+        material=_material_fields(spec.material, source),
     )
+
+
+def _material_fields(fields: dict, source: str) -> tuple:
+    """A muscle file's material, checked as facesim.model.Material's fields."""
+    from pydantic import ValidationError
+
+    from .model import Material
+
+    try:
+        Material.model_validate(fields)
+    except ValidationError as error:
+        first = error.errors()[0]
+        raise InputError(f"{source}: material -> {' -> '.join(map(str, first['loc']))}: {first['msg']}") from None
+    return tuple(sorted(fields.items()))
 
 
 def load_muscles(path: str | Path, mesh: FaceMesh, source: str | None = None) -> MuscleSet:

@@ -20,7 +20,7 @@ def muscle_regions(model) -> list[np.ndarray]:
     kernels._muscle_frame(model.arrays, model.rest_position, work.frame)
     regions = []
     for m in range(model.muscle_count):
-        count = kernels._region_of_influence(model.arrays, m, rest.origin, rest.insertion_point, work)
+        count = kernels._region_of_influence(model.arrays, m, rest.origin, rest.insertion_point, work.frame, work)
         regions.append(work.region[:count].copy())
     return regions
 

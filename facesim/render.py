@@ -35,6 +35,9 @@ from .rig import eyeball
 BACKENDS = ("egl", "osmesa")
 _LIBRARIES = {"osmesa": "OSMesa", "egl": "EGL"}
 CAMERAS = {"front": 0.0, "three-quarter": 35.0, "profile": 90.0}
+#: What a head's frame holds: its face (the simulated skin, brow to chin: expressions are
+#: read there), or the whole head and shoulders.
+FRAMINGS = ("face", "head")
 
 SKIN = (0.86, 0.66, 0.55, 1.0)
 BACKGROUND = (0.93, 0.93, 0.95, 1.0)
@@ -64,12 +67,15 @@ class RenderSettings:
     wireframe: bool = False
     show_muscles: bool = False
     antialias: bool = True
+    framing: str = "face"
 
     def __post_init__(self):
         if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192):
             raise InputError(f"--size: expected WxH between 16 and 8192, got {self.width}x{self.height}")
         if self.camera not in CAMERAS:
             raise InputError(f"--camera: expected one of {', '.join(CAMERAS)}, got {self.camera!r}")
+        if self.framing not in FRAMINGS:
+            raise InputError(f"--framing: expected one of {', '.join(FRAMINGS)}, got {self.framing!r}")
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -226,7 +232,7 @@ class FaceRenderer:
         else:
             self._add_figure(scene, figure, pyrender)
             self._neck = figure.neck
-            framed = figure.rest
+            framed = rest if settings.framing == "face" else figure.rest
         self._arrows = self._lines(scene, np.repeat(rest, 2, axis=0), ARROW) if settings.show_muscles else None
         # A head's wireframe is its simulation mesh, drawn over the skin it drives.
         self._edges = FaceMesh(rest, faces).edges if figure is not None and settings.wireframe else None

@@ -144,6 +144,7 @@ class Calibration:
                 continue
             side = np.sign(x[group[0]["insertion"], 0]) if len(group) > 1 else 0.0
             here = np.flatnonzero(np.sign(np.round(x[:, 0], 3)) == side) if side else np.flatnonzero(np.abs(x[:, 0]) < 0.05)
+            here = np.setdiff1d(here, self.mesh.boundary_loops[0])  # the rim is pinned: an insertion there never moves
             insertions = here[np.argsort(np.linalg.norm(theirs[here], axis=1))[-INSERTIONS:]]
             best = (self.loss(self.raw, au), self.raw)
             for i in insertions:

@@ -57,8 +57,9 @@ def spec(name: str, **changes):
 
 def material(name: str = "happy", **changes):
     """A spec's material with fields replaced."""
-    s = spec(name)
-    return s.material.model_copy(update=changes)
+    from facesim.model import Material
+
+    return Material.model_validate({**spec(name).material.model_dump(exclude_unset=True), **changes})
 
 
 def held_apex(s, hold: int = 200):

@@ -118,40 +118,61 @@ def region_of_influence(delta, insertion, edges, n):
 
 
 def back_project(i, force_2d, uv, x, faces, edges):
-    """Eq. 3.22-3.25 by the affine map of the one-ring triangle whose 2D wedge holds the
-    force; along the closest edge when none does."""
-    magnitude = np.linalg.norm(force_2d[:2])
+    """Eq. 3.22-3.25 by the affine map of each one-ring triangle whose 2D wedge holds the
+    force, their unit directions averaged with weights sin φ sin(θ - φ) (f at angle φ in a
+    wedge of angle θ; one wedge unless the ring folds); a force no wedge holds goes along the edges nearest it on either side,
+    blended by the angle between them."""
+    f = force_2d[:2]
+    magnitude = np.linalg.norm(f)
+    if magnitude == 0:
+        return np.zeros(3)
+    total = np.zeros(3)
     for face in faces[(faces == i).any(axis=1)]:
         k = list(face).index(i)
         a, b = face[(k + 1) % 3], face[(k + 2) % 3]
         basis = np.column_stack([uv[a, :2] - uv[i, :2], uv[b, :2] - uv[i, :2]])
         if abs(np.linalg.det(basis)) < 1e-12:
             continue
-        alpha, beta = np.linalg.solve(basis, force_2d[:2])
+        alpha, beta = np.linalg.solve(basis, f)
         if alpha >= 0 and beta >= 0:
             f3 = alpha * (x[a] - x[i]) + beta * (x[b] - x[i])
-            return f3 * magnitude / np.linalg.norm(f3)
+            weight = alpha * beta * np.linalg.det(basis) ** 2 / (np.prod(np.linalg.norm(basis, axis=0)) * magnitude**2)
+            total += weight * f3 / np.linalg.norm(f3)
+    if np.linalg.norm(total) > 0:
+        return total * magnitude / np.linalg.norm(total)
+
     neighbours = np.unique(np.concatenate([edges[edges[:, 0] == i, 1], edges[edges[:, 1] == i, 0]]))
-    directions = uv[neighbours, :2] - uv[i, :2]
-    cosine = directions @ force_2d[:2] / (np.linalg.norm(directions, axis=1) * magnitude)
-    best = np.argmax(cosine)
-    if cosine[best] <= 0:
-        return np.zeros(3)
-    edge = x[neighbours[best]] - x[i]
-    return edge / np.linalg.norm(edge) * cosine[best] * magnitude
+    angle = {j: np.arctan2(*(uv[j, :2] - uv[i, :2])[::-1]) - np.arctan2(f[1], f[0]) for j in neighbours}
+    to_q = {j: a % (2 * np.pi) for j, a in angle.items()}  # counter-clockwise from f to the edge
+    from_p = {j: -a % (2 * np.pi) for j, a in angle.items()}  # counter-clockwise from the edge to f
+    q, p = min(to_q, key=to_q.get), min(from_p, key=from_p.get)
+    t = from_p[p] / (from_p[p] + to_q[q]) if from_p[p] + to_q[q] > 0 else 0.0
+
+    def kept(j):
+        e = uv[j, :2] - uv[i, :2]
+        return max(0.0, e @ f / (np.linalg.norm(e) * magnitude)) * magnitude * (x[j] - x[i]) / np.linalg.norm(x[j] - x[i])
+
+    return (1 - t) * kept(p) + t * kept(q)
 
 
 def muscle_forces(model, xp, activation, target=None):
     """Eq. 3.1-3.4 on every vertex of every active muscle's region, the muscles' ends
-    where ``target`` (the bones' positions; rest by default) holds them."""
+    where ``target`` (the bones' positions; rest by default) holds them, δ and the
+    regions where it attaches the skin (or at the moving skin: ``regions: moving``)."""
     force = np.zeros_like(xp)
     use_uv = model.material.uv_projection
-    frame = project_uv(xp, model.axis_x, model.axis_z, model.radius) if use_uv else xp
-    origins, insertions = muscle_geometry(model, model.rest_position if target is None else target)
+    target = model.rest_position if target is None else target
+
+    def in_frame(x):
+        return project_uv(x, model.axis_x, model.axis_z, model.radius) if use_uv else x
+
+    frame = in_frame(xp)
+    attached = in_frame(target) if model.material.regions == "attached" else frame  # where δ is evaluated
+    origins, insertions = muscle_geometry(model, target)
     edges = model.spring_indices
     for m in np.flatnonzero(activation[:model.muscle_count]):
         origin = origins[m]
-        d = delta(model, m, frame, origins, insertions)
+        d = delta(model, m, attached, origins, insertions)
         for i in region_of_influence(d, model.muscle_insertion[m], edges, len(xp)):
             if model.pinned[i]:
                 continue
@@ -216,7 +237,7 @@ def step(model, x, v, activation, h):
         stiff, pull = stiff + s, pull + p
     if mat.bending:
         s, p = bending_terms(xp, target, model.hinge, model.hinge_weight, mat.bending)
-        stiff, pull = stiff + s, pull + p
+        stiff, pull = stiff + s, pull + p - h * s[:, None] * v  # eq. 3.19's form: each vertex's own term at X, not X*
     force = muscle_forces(model, xp, activation, target)
     denominator = np.maximum(mat.mass + h * mat.damping - h * h * stiff, mat.mass)
     v_new = (mat.mass * v + h * force + h * pull) / denominator[:, None]

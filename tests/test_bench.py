@@ -39,8 +39,8 @@ def test_bench_quick_prints_every_table_with_sensible_figures(tmp_path):
     # run, on an idle machine); here the suite's other worker shares the two cores.
     assert f["numba_ratio"] > 0
     assert f["compile"]["cached"]["first"] < f["compile"]["cold"]["first"]  # the on-disk cache is used
-    for face in ("the Hopper face", "the default head"):
-        assert f["solvers"][face]["implicit"] > 0 and f["solvers"][face]["quasi"] > 0
+    assert f["solvers"]["the Hopper face"]["implicit"] > 0 and f["solvers"]["the Hopper face"]["quasi"] > 0
+    assert f["solvers"]["the default head"]["implicit"] > 0 and f["solvers"]["the default head"]["no_bending"] > 0
     assert max(f["solvers"]["apex, the default head"].values()) < 0.02
     assert 0 < f["fresh_wall"] < 60 and 50 < f["fresh_peak_mb"] < 4000
     for render in f["render"].values():

@@ -238,7 +238,7 @@ def test_no_gl_backend_names_the_package_to_install(tmp_path):
 
 
 def test_divergence_is_reported_with_its_frame_and_nothing_written(tmp_path):
-    spec = write_spec(tmp_path, dt=0.5, material={"solver": "quasi-implicit", "substeps": 1})
+    spec = write_spec(tmp_path, dt=0.5, material={"preset": "thesis", "substeps": 1})
     one_line_error(facesim("render", spec, "-o", tmp_path / "a.mp4"), 1, "at frame")
     assert not list(tmp_path.glob("*.mp4")) and not list(tmp_path.glob(".a*"))
 

@@ -228,7 +228,7 @@ def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, name):
 
 
 def test_a_failed_render_leaves_no_directory_it_made(tmp_path):
-    spec = write_spec(tmp_path, dt=0.5, material={"solver": "quasi-implicit", "substeps": 1})  # diverges
+    spec = write_spec(tmp_path, dt=0.5, material={"preset": "thesis", "substeps": 1})  # diverges
     one_line_error(facesim("render", spec, "-o", tmp_path / "new" / "deeper" / "a.mp4", *SMALL), 1, "at frame")
     assert not (tmp_path / "new").exists()
 

@@ -10,6 +10,7 @@ import pytest
 
 from conftest import THESIS_EXPRESSIONS, spec
 from facesim.config import HEAD, HEAD_MUSCLES
+from facesim.errors import InputError
 from facesim.head import load_head
 from facesim.render import FaceRenderer, RenderSettings
 from facesim.simulate import figure_for, simulate
@@ -95,6 +96,21 @@ needs_mediapipe = pytest.mark.skipif(importlib.util.find_spec("mediapipe") is No
 FEATURES = {"mouth corners": [61, 291], "outer eye corners": [33, 263], "nose tip": [1], "chin": [152]}
 
 
+def test_the_face_framing_fills_the_frame_with_the_face():
+    """--framing face (the default on a head) draws the face from brow to chin across the
+    frame, where expressions are read; --framing head keeps head and shoulders."""
+    neutral = simulate(spec("happy", activations={}, frames=1))
+    head = neutral.model.mesh.head
+    eyes = head.landmark_positions[[33, 263]]  # outer eye corners
+    width = {}
+    for framing in ("face", "head"):
+        with FaceRenderer.of(neutral, RenderSettings(256, 256, framing=framing)) as renderer:
+            width[framing] = np.linalg.norm(np.subtract(*renderer.project(eyes))) / 256
+    assert width["face"] > 0.35 and width["face"] > 1.6 * width["head"]
+    with pytest.raises(InputError, match=r"--framing: expected one of face, head, got 'torso'"):
+        RenderSettings(framing="torso")
+
+
 @needs_mediapipe
 def test_mediapipe_finds_the_default_head_where_its_points_project():
     from facesim.photo import detect_landmarks
@@ -126,5 +142,6 @@ def _teeth_pixels(animation, frame: int) -> int:
 def test_teeth_show_in_the_rendered_mouth_when_the_jaw_opens():
     opened = simulate(spec("happy", activations={"jaw": 1.0}, onset=15))
     assert opened.jaw_at(opened.frames - 1) == pytest.approx(np.radians(20))
-    assert _teeth_pixels(opened, opened.frames - 1) > 50  # about 80 of the 512² frame (the whole head)
-    assert _teeth_pixels(opened, 0) < 20  # closed lips hide them
+    shown = _teeth_pixels(opened, opened.frames - 1)
+    assert shown > 300  # about 460 of the 512² frame (the face framed)
+    assert _teeth_pixels(opened, 0) < 0.2 * shown  # closed lips hide them but for a line at their seam (73 pixels)

@@ -7,6 +7,7 @@ import pytest
 import naive
 from conftest import material, spec
 from facesim import kernels as K, solver
+from facesim.config import HOPPER_MESH
 from facesim.simulate import model_for, run
 from facesim.spec import activation_table
 
@@ -163,10 +164,10 @@ def test_flood_fill_finds_the_brute_force_region(uv, rng):
     work.frame[:] = frame
     region, delta = work.region, work.delta
     for m in range(model.muscle_count):
-        count = K._region_of_influence(model.arrays, m, model.muscle_origin, model.muscle_insertion_point, work)
+        count = K._region_of_influence(model.arrays, m, model.muscle_origin, model.muscle_insertion_point, work.frame, work)
         ref_delta = naive.delta(model, m, frame)
         expected = naive.region_of_influence(ref_delta, model.muscle_insertion[m], model.spring_indices, model.vertex_count)
-        assert count > 3, model.muscles.names[m]
+        assert count >= 3, model.muscles.names[m]
         assert sorted(region[:count]) == sorted(expected), model.muscles.names[m]
         assert_close(delta[:count], ref_delta[region[:count]])
 
@@ -204,8 +205,7 @@ def test_back_projected_force_lies_in_its_triangle_and_keeps_its_2d_direction(mo
     for i in rng.choice(interior, 60, replace=False):
         angle = rng.uniform(0, 2 * np.pi)
         f2 = 3.0 * np.array([np.cos(angle), np.sin(angle)])
-        assert K._back_project(i, f2[0], f2[1], uv, x, model.neighbour_start, model.neighbour_index,
-                               model.ring_start, model.ring_a, model.ring_b, f3)
+        assert K._back_project(model.arrays, i, f2[0], f2[1], uv, x, f3)
         assert np.linalg.norm(f3) == pytest.approx(3.0)
         for k in range(model.ring_start[i], model.ring_start[i + 1]):
             a, b = model.ring_a[k], model.ring_b[k]
@@ -232,8 +232,7 @@ def test_back_projection_of_a_force_leaving_the_mesh_keeps_its_component_along_t
     for i in mesh.boundary_loops[0][::6]:
         f2 = 2.0 * (uv[i] - centre) / np.linalg.norm(uv[i] - centre)  # outward: no triangle holds it
         f3 = np.empty(3)
-        found = K._back_project(i, f2[0], f2[1], uv, model.rest_position, model.neighbour_start,
-                                model.neighbour_index, model.ring_start, model.ring_a, model.ring_b, f3)
+        found = K._back_project(model.arrays, i, f2[0], f2[1], uv, model.rest_position, f3)
         expected = naive.back_project(i, f2, uv, model.rest_position, model.faces, model.spring_indices)
         assert found == bool(np.any(expected))
         assert_close(f3, expected)
@@ -282,7 +281,9 @@ def test_rig_targets_match_reference(name, rng):
 
 @pytest.mark.parametrize("name", ["happy", "surprise"])  # surprise opens the jaw
 def test_whole_run_matches_reference(name):
-    s = spec(name, material=material(name, solver="quasi-implicit"))
+    """The thesis's model, on the Hopper face with its own muscles (the head's are
+    calibrated with bending, which the thesis's update cannot carry)."""
+    s = spec(name, mesh=HOPPER_MESH, muscles=None, material=material(name, preset="thesis"))
     model = model_for(s)
     table = activation_table(s, model.muscles)
     positions, *_ = run(model, table, s.dt)
@@ -394,3 +395,31 @@ def test_implicit_step_solves_its_system(rng):
     keep = np.repeat(~contact, 3) & free
     assert_close(state.v.reshape(-1)[keep], expected[keep], rtol=1e-6)
     assert np.abs(state.v[model.pinned]).max() == 0.0
+
+
+def test_back_projection_turns_continuously_with_the_force(model):
+    """A force turned once around any vertex gives a 3D force that turns without a jump:
+    where it leaves the mesh (the mouth's and the eyes' rims), and where the projected
+    one-ring folds (the lips' rolled edge, beside the nose). A jump at the rim made the
+    inner lower lip rattle between its two boundary edges under AU12, and picking the
+    first of a folded ring's wedges made mirror-image vertices pull differently."""
+    uv = naive.project_uv(model.rest_position, model.axis_x, model.axis_z, model.radius)
+    free = [i for i in range(model.vertex_count) if not model.pinned[i]]
+    f3 = np.empty(3)
+
+    def turned(i, angles):
+        out = []
+        for angle in angles:
+            K._back_project(model.arrays, i, np.cos(angle), np.sin(angle), uv, model.rest_position, f3)
+            out.append(f3.copy())
+        return np.linalg.norm(np.diff(out, axis=0), axis=1)
+
+    worst = 0.0
+    angles = np.linspace(0, 2 * np.pi, 1441)
+    for i in free:
+        jumps = turned(i, angles)
+        k = int(jumps.argmax())
+        if jumps[k] > 0.05:  # steep (two edges nearly parallel in 2D, not in 3D) or a jump: look 1000 times closer
+            jumps = turned(i, np.linspace(angles[k], angles[k + 1], 1001))
+        worst = max(worst, jumps.max())
+    assert worst < 0.05

@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 import yaml
 
-from facesim.config import HOPPER_MUSCLES
+from conftest import EXPRESSIONS
+from facesim.config import DEFAULT_MUSCLES, HOPPER_MUSCLES
 from facesim.errors import InputError
+from facesim.mesh import load_mesh
 from facesim.muscles import LINEAR, load_muscles
 
 THESIS_MUSCLES = [
@@ -43,16 +45,18 @@ def test_indices_valid_and_on_the_side_the_name_says(mesh, muscles):
     assert muscles.controls == ("jaw", "eyelid_r", "eyelid_l")
 
 
-def test_attachments_and_outer_rim_are_pinned_insertions_are_not(mesh, muscles):
+def test_the_rim_is_pinned_attachments_as_the_file_says_insertions_never(mesh, muscles):
+    """The default head's file leaves its attachments free (its hypodermis holds the
+    skin), the thesis's face pins them (test below)."""
     pinned = set(muscles.pinned.tolist())
-    linear = muscles.kind == LINEAR
-    assert set(muscles.attachment[linear].tolist()) <= pinned
+    attachments = set(muscles.attachment[muscles.kind == LINEAR].tolist())
     assert set(mesh.boundary_loops[0].tolist()) <= pinned
+    assert (attachments <= pinned) == yaml.safe_load(DEFAULT_MUSCLES.read_text()).get("pinned", {}).get("attachments", True)
     assert not set(muscles.insertion.tolist()) & pinned
 
 
-def write_muscles(tmp_path, change):
-    data = yaml.safe_load(HOPPER_MUSCLES.read_text())
+def write_muscles(tmp_path, change, source=HOPPER_MUSCLES):
+    data = yaml.safe_load(source.read_text())
     change(data)
     path = tmp_path / "bad.muscles.yaml"
     path.write_text(yaml.safe_dump(data))
@@ -88,6 +92,16 @@ def test_bad_muscle_files_give_one_line_naming_file_and_muscle(tmp_path, mesh, c
     assert text.startswith(str(path)) and "\n" not in text
 
 
+def test_an_insertion_on_the_pinned_rim_is_refused(tmp_path, mesh):
+    """A muscle inserted where the skin is pinned would pull nothing there: one line, not
+    a muscle that silently does nothing at its centre."""
+    rim = mesh.boundary_loops[0]
+    right = rim[mesh.vertices[rim, 0] < -1.0][0]
+    path = write_muscles(tmp_path, lambda d: first(d).update(insertion=int(right)))
+    with pytest.raises(InputError, match=rf"muscle frontalis_medial_r: insertion: vertex {right} is pinned"):
+        load_muscles(path, mesh)
+
+
 def test_muscles_given_as_3d_points_snap_to_the_same_vertices(tmp_path, mesh, muscles):
     def point(index):
         return [float(c) + 0.005 for c in mesh.vertices[index]]  # the lips are 0.03 cm apart
@@ -103,7 +117,7 @@ def test_muscles_given_as_3d_points_snap_to_the_same_vertices(tmp_path, mesh, mu
         for part in [data["jaw"]] + data["eyelids"]:
             for key in ("lower", "upper"):
                 part[key] = [point(i) for i in part[key]]
-    snapped = load_muscles(write_muscles(tmp_path, as_points), mesh)
+    snapped = load_muscles(write_muscles(tmp_path, as_points, DEFAULT_MUSCLES), mesh)
     for key in ("attachment", "insertion", "centre_index", "pinned"):
         assert np.array_equal(getattr(snapped, key), getattr(muscles, key)), key
     assert all(np.array_equal(a, b) for a, b in zip(snapped.ring, muscles.ring))
@@ -113,3 +127,24 @@ def test_muscles_given_as_3d_points_snap_to_the_same_vertices(tmp_path, mesh, mu
 def test_a_head_held_by_its_hypodermis_leaves_its_attachments_free(tmp_path, mesh):
     pinned = load_muscles(write_muscles(tmp_path, lambda d: d["pinned"].update(attachments=False)), mesh).pinned
     assert set(pinned.tolist()) == set(mesh.boundary_loops[0].tolist())
+
+
+def test_a_muscle_file_brings_the_material_its_forces_were_set_on_and_a_spec_wins(tmp_path):
+    """The Hopper face's file was tuned on the thesis's skin (no bending, regions at the
+    moving skin): a spec without a material gets that skin, a spec's own fields win, and a
+    bad field in the file is one line naming the file."""
+    import facesim
+    from facesim.config import HOPPER_MESH
+    from facesim.model import Material
+    from facesim.simulate import model_for
+
+    spec = facesim.load_spec(EXPRESSIONS / "happy.yaml").with_overrides(mesh=HOPPER_MESH)
+    model = model_for(spec)
+    assert (model.material.bending, model.material.regions) == (0.0, "moving")
+    mine = model_for(spec.with_overrides(material=Material(bending=20.0)))
+    assert (mine.material.bending, mine.material.regions) == (20.0, "moving")
+    head = model_for(facesim.load_spec(EXPRESSIONS / "happy.yaml"))
+    assert (head.material.bending, head.material.regions) == (Material().bending, "attached")
+    path = write_muscles(tmp_path, lambda d: d.update(material={"bending": -1}))
+    with pytest.raises(InputError, match=r"bad.muscles.yaml: material -> bending: Input should be greater than or equal to 0"):
+        load_muscles(path, load_mesh(HOPPER_MESH))

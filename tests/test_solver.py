@@ -71,11 +71,16 @@ def test_a_force_term_is_one_kernel_and_one_line(tmp_path):
 
 
 @pytest.mark.parametrize("name", THESIS_EXPRESSIONS)
-def test_implicit_solver_holds_each_expression_where_the_thesis_update_does(name):
-    model, reference, folded = held_apex(spec(name, material=material(name, solver="quasi-implicit")))
-    implicit_model, implicit, implicit_folded = held_apex(spec(name, material=material(name, solver="implicit")))
+def test_one_implicit_step_per_frame_holds_each_expression_where_small_steps_do(name):
+    """The default step (one per frame) against the same model at eight steps per frame
+    with conjugate gradients run to 1e-8: the held apex within 2% of the largest
+    displacement. The thesis's per-vertex update cannot be the reference here: the skin's
+    bending couples four vertices per hinge, which it cannot carry (facesim.model.Material);
+    it is checked against the thesis's equations in tests/test_kernels.py instead."""
+    model, reference, folded = held_apex(spec(name, material=material(name, substeps=8, tolerance=1e-8, iterations=2000)))
+    implicit_model, implicit, implicit_folded = held_apex(spec(name))
     assert (folded, implicit_folded) == (0, 0)
-    assert (model.material.substeps, implicit_model.material.substeps) == (4, 1)
+    assert (model.material.substeps, implicit_model.material.substeps) == (8, 1)
     largest = np.linalg.norm(reference - model.rest_position, axis=1).max()
     assert largest > 0.2  # every expression moves the face by millimetres
     assert np.linalg.norm(implicit - reference, axis=1).max() <= 0.02 * largest
