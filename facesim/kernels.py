@@ -45,7 +45,7 @@ ModelArrays = namedtuple("ModelArrays", [
     "muscle_kind", "muscle_axes", "muscle_insertion", "muscle_centre_start", "muscle_centre_index",
     "muscle_cos_zone", "muscle_r", "muscle_r_max", "muscle_force", "axis_x", "axis_z", "radius",
     "jaw_column", "jaw_weight", "jaw_hinge", "jaw_axis", "jaw_max", "lid_column", "lid_centre", "lid_delta",
-    "drive_column", "drive_weight", "contact_upper", "contact_lower", "contact_gap",
+    "lid_raise_column", "lid_raise_delta", "drive_column", "drive_weight", "contact_upper", "contact_lower", "contact_gap",
     "mass", "damping", "stiffness", "nonlinearity", "repulsion_nonlinearity", "length_unit", "tissue", "drive",
     "bending", "edge_repulsion", "uv_projection", "attached_regions", "implicit", "iterations", "tolerance",
 ])
@@ -607,26 +607,30 @@ def _rotate(px, py, pz, hx, hy, hz, ax, ay, az, angle):
 @njit(**NUMBA_OPTIONS)
 def _rig_control(model, control):
     """Where the jaw and eyelids (facesim.rig) take each vertex under the activations of
-    ``control``: its rest position slid over the eyeball by the lid closure c, in
-    cylindrical coordinates about the eye's horizontal axis, then turned about the jaw
-    hinge by w θ, into ``control.target``. ``control.hold`` is the extra stiffness driving
-    the lips and lid contours, drive * min(1, 10 a) for the activation a of their
-    control: zero while the jaw and lids are at rest. Then the muscles' ends, from where
+    ``control``: its rest position slid over the eyeball by the lid closure c and the
+    levator's raise a (c Δ_close + a (1 - c) Δ_raise in cylindrical coordinates about the
+    eye's horizontal axis), then turned about the jaw hinge by w θ, into ``control.target``.
+    ``control.hold`` is the extra stiffness driving the lips and lid contours,
+    drive * min(1, 10 a) for the activation a of their control (a lid's: the larger of its
+    closure and its raise): zero while the jaw and lids are at rest. Then the muscles' ends, from where
     the bones hold them (``_muscle_geometry``)."""
     activation = control.activation
     theta = model.jaw_max * activation[model.jaw_column] if model.jaw_column >= 0 else 0.0
     for i in range(model.rest_position.shape[0]):
         px, py, pz = model.rest_position[i, 0], model.rest_position[i, 1], model.rest_position[i, 2]
         column = model.drive_column[i]
-        control.hold[i] = model.drive * model.drive_weight[i] * min(1.0, 10.0 * activation[column]) if column >= 0 else 0.0
+        a = activation[model.lid_raise_column[i]] if model.lid_raise_column[i] >= 0 else 0.0
+        driving = max(activation[column], a) if column >= 0 else 0.0
+        control.hold[i] = model.drive * model.drive_weight[i] * min(1.0, 10.0 * driving)
         if model.lid_column[i] >= 0:
             c = activation[model.lid_column[i]]
-            if c != 0.0:
+            a *= 1.0 - c  # the levator lets go as the lid closes: a blink closes a raised lid
+            if c != 0.0 or a != 0.0:
                 dy = py - model.lid_centre[i, 1]
                 dz = pz - model.lid_centre[i, 2]
-                phi = math.atan2(dy, dz) + c * model.lid_delta[i, 1]
-                r = math.sqrt(dy * dy + dz * dz) + c * model.lid_delta[i, 2]
-                px += c * model.lid_delta[i, 0]
+                phi = math.atan2(dy, dz) + c * model.lid_delta[i, 1] + a * model.lid_raise_delta[i, 1]
+                r = math.sqrt(dy * dy + dz * dz) + c * model.lid_delta[i, 2] + a * model.lid_raise_delta[i, 2]
+                px += c * model.lid_delta[i, 0] + a * model.lid_raise_delta[i, 0]
                 py = model.lid_centre[i, 1] + r * math.sin(phi)
                 pz = model.lid_centre[i, 2] + r * math.cos(phi)
         if theta != 0.0 and model.jaw_weight[i] > 0.0:

@@ -117,8 +117,18 @@ class Eyelid(_Contours):
 
     name: str
     reach: float = Field(0.45, gt=0, le=2)
+    levator: str | None = Field(None, description="name of the control raising the upper lid (the levator "
+                                   "palpebrae superioris, AU5), if the face has one")
+    levator_angle: float = Field(12.5, gt=0, le=30, description="degrees the upper lid's middle turns up over the "
+                                 "eyeball at the levator's full activation (its ends at the eye corners stay); 12.5 "
+                                 "matches ICT's eyeWide on the default head (REALISM.md, AU5)")
 
     _names = field_validator("name")(_snake_case)
+
+    @field_validator("levator")
+    @classmethod
+    def _levator_name(cls, value):
+        return None if value is None else _snake_case(value)
 
 
 class Pinned(Strict):
@@ -146,7 +156,7 @@ class MuscleFile(Strict):
     @model_validator(mode="after")
     def _unique_names(self):
         seen = {"jaw"} if self.jaw else set()
-        for name in [m.name for m in self.muscles] + [e.name for e in self.eyelids]:
+        for name in [m.name for m in self.muscles] + [e.name for e in self.eyelids] + [e.levator for e in self.eyelids if e.levator]:
             if name in seen:
                 raise ValueError(f"duplicate name {name!r}")
             seen.add(name)
@@ -181,6 +191,8 @@ class EyelidRig:
     upper: np.ndarray
     lower: np.ndarray
     reach: float
+    levator: str | None = None
+    levator_angle: float = 0.0  # radians
 
 
 @dataclass(frozen=True)
@@ -330,8 +342,8 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         middle = mesh.vertices[np.concatenate([upper, lower])].mean(axis=0)
         _check_side(lid.name, (middle[0], middle[0]), width, where)
         _upper_over_lower(mesh, upper, lower, where)
-        eyelids.append(EyelidRig(lid.name, upper, lower, lid.reach))
-        controls.append(lid.name)
+        eyelids.append(EyelidRig(lid.name, upper, lower, lid.reach, lid.levator, float(np.radians(lid.levator_angle))))
+        controls += [lid.name] + ([lid.levator] if lid.levator else [])
     centre_start = np.cumsum([0] + [len(c) for c in centres]).astype(np.int64)
     return MuscleSet(
         names=tuple(m.name for m in spec.muscles) + tuple(controls),

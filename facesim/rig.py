@@ -14,13 +14,18 @@ acting on top.
   w is 1 on the lower lip and the rim below the hinge, 0 on the upper lip and above the
   hinge, and harmonic in between (the graph Laplacian's Dirichlet problem), so the opening
   spreads smoothly through the cheeks and the lips part without tearing the corners.
-- **Eyelids** (AU43 eyes closed, AU45 blink): each contour vertex slides over the eyeball
+- **Eyelids** (AU43 eyes closed, AU45 blink; AU5 upper lid raiser): each contour vertex slides over the eyeball
   about the horizontal axis through its centre, in cylindrical coordinates (x, φ, r) about
   that axis, to a meeting line one fifth of the way up from the lower lid (the upper lid
   does most of a blink), at a radius outside the eyeball. The upper target always stays
   above its lower partner, ``LID_GAP`` apart when closed, so the lids never pass through
   each other. The skin around the opening, out to ``reach`` eye widths, follows with a
-  harmonic share of the contour's motion.
+  harmonic share of the contour's motion. The levator palpebrae superioris (an eyelid's
+  ``levator`` control) turns the upper contour up over the eyeball instead, by
+  ``levator_angle`` at its middle and less toward the corners (sin π s along it, s from
+  corner to corner); the lower lid stays, and the skin follows the same way. Closure c
+  and raise a add in (Δx, Δφ, Δr) as c Δ_close + a (1 - c) Δ_raise: the levator lets go
+  as the lid closes, so a blink closes a raised lid.
 
 The jaw's lip lists and the lid contours are paired in order; each pair is also a contact
 (``kernels._contacts``): the upper vertex never drops below its lower partner, so a
@@ -68,7 +73,9 @@ class Rig:
     jaw_hinge : (3,) a point on the hinge axis; jaw_axis : (3,) its unit direction (+x);
     jaw_max : θ at activation 1 (radians); lid_column : (n,) activation column of the
     eyelid moving each vertex, -1 for none; lid_centre : (n, 3) its eyeball centre;
-    lid_delta : (n, 3) (Δx, Δφ, Δr) at full closure; drive_column : (n,) the control
+    lid_delta : (n, 3) (Δx, Δφ, Δr) at full closure; lid_raise_column : (n,) activation
+    column of the levator raising the vertex's upper lid, -1 for none; lid_raise_delta :
+    (n, 3) (Δx, Δφ, Δr) at the levator's full activation; drive_column : (n,) the control
     whose activation drives the vertex to its target (the lips: the jaw; the lid contours:
     their eyelid), -1 for none; drive_weight : (n,) its share of ``Material.drive``;
     contact_upper, contact_lower, contact_gap : (k,) the lip and lid pairs that may not
@@ -83,6 +90,8 @@ class Rig:
     lid_column: np.ndarray
     lid_centre: np.ndarray
     lid_delta: np.ndarray
+    lid_raise_column: np.ndarray
+    lid_raise_delta: np.ndarray
     drive_column: np.ndarray
     drive_weight: np.ndarray
     contact_upper: np.ndarray
@@ -160,8 +169,9 @@ def _cylindrical(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
 
 
 def _eyelid(mesh: FaceMesh, lid, opening: np.ndarray | None, centre: np.ndarray, radius: float, width: float):
-    """The contour's (Δx, Δφ, Δr) at full closure, spread harmonically over the skin
-    within ``reach`` eye widths of the opening. Returns the region and its deltas."""
+    """The contour's (Δx, Δφ, Δr) at full closure, and at the levator's full raise,
+    spread harmonically over the skin within ``reach`` eye widths of the opening.
+    Returns the region, its two deltas and the contour."""
     x = mesh.vertices
     upper, lower = _cylindrical(x[lid.upper], centre), _cylindrical(x[lid.lower], centre)
     meet_x = (upper[:, 0] + lower[:, 0]) / 2
@@ -176,10 +186,13 @@ def _eyelid(mesh: FaceMesh, lid, opening: np.ndarray | None, centre: np.ndarray,
     outside = np.flatnonzero(distance > (0.5 + lid.reach) * width)
     corners = np.setdiff1d(opening, contour) if opening is not None else np.zeros(0, dtype=np.int64)
     fixed = np.concatenate([contour, corners, np.setdiff1d(outside, contour)])
-    values = np.concatenate([delta_upper, delta_lower, np.zeros((len(fixed) - len(contour), 3))])
-    delta = harmonic(mesh, fixed, values)
+    s = np.arange(1, len(lid.upper) + 1) / (len(lid.upper) + 1)  # along the upper lid, corner to corner
+    raise_upper = np.column_stack([np.zeros_like(s), lid.levator_angle * np.sin(np.pi * s), np.zeros_like(s)])
+    rest = np.zeros((len(fixed) - len(lid.upper), 3))
+    delta = harmonic(mesh, fixed, np.concatenate([delta_upper, delta_lower, rest[:len(fixed) - len(contour)]]))
+    raised = harmonic(mesh, fixed, np.concatenate([raise_upper, rest]))
     region = np.setdiff1d(np.flatnonzero(distance <= (0.5 + lid.reach) * width), corners)
-    return region, delta[region], contour
+    return region, delta[region], raised[region], contour
 
 
 def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
@@ -196,16 +209,21 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
     lid_column = np.full(n, -1, dtype=np.int64)
     lid_centre = np.zeros((n, 3))
     lid_delta = np.zeros((n, 3))
+    lid_raise_column = np.full(n, -1, dtype=np.int64)
+    lid_raise_delta = np.zeros((n, 3))
     for lid in muscles.eyelids:
         opening = _opening(mesh, lid.upper)
         points = mesh.vertices[opening if opening is not None else np.concatenate([lid.upper, lid.lower])]
         centre, radius = eyeball(points)
-        region, delta, contour = _eyelid(mesh, lid, opening, centre, radius, float(np.ptp(points[:, 0])))
+        region, delta, raised, contour = _eyelid(mesh, lid, opening, centre, radius, float(np.ptp(points[:, 0])))
         region_free = region[lid_column[region] < 0]
         keep = np.isin(region, region_free)
         lid_column[region_free] = muscles.index(lid.name)
         lid_centre[region_free] = centre
         lid_delta[region_free] = delta[keep]
+        if lid.levator:
+            lid_raise_column[region_free] = muscles.index(lid.levator)
+            lid_raise_delta[region_free] = raised[keep]
         drive_column[contour] = muscles.index(lid.name)
         drive_weight[contour] = 1.0
     upper = [muscles.jaw.upper] if muscles.jaw is not None else []
@@ -215,5 +233,6 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
     upper = np.concatenate(upper) if upper else np.zeros(0, dtype=np.int64)
     lower = np.concatenate(lower) if lower else np.zeros(0, dtype=np.int64)
     gap = np.minimum(CONTACT_GAP, mesh.vertices[upper, 1] - mesh.vertices[lower, 1])
-    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, lid_column, lid_centre, lid_delta, drive_column, drive_weight,
+    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, lid_column, lid_centre, lid_delta, lid_raise_column,
+               lid_raise_delta, drive_column, drive_weight,
                upper, lower, gap)

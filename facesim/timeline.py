@@ -78,6 +78,7 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     "AU1": ("inner brow raiser", {"frontalis_medial": 1.0}),
     "AU2": ("outer brow raiser", {"frontalis_lateral": 1.0, "frontalis_outer": 1.0}),
     "AU4": ("brow lowerer", {"corrugator_supercilii": 1.0, "procerus": 1.0}),
+    "AU5": ("upper lid raiser", {"levator_palpebrae": 1.0}),
     "AU6": ("cheek raiser", {"orbicularis_oculi": 1.0}),
     "AU7": ("lid tightener", {"orbicularis_oculi": 0.5}),
     "AU9": ("nose wrinkler", {"levator_labii_superioris_alaeque_nasi": 1.0}),

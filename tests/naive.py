@@ -194,26 +194,27 @@ def muscle_geometry(model, target):
 
 
 def rig_targets(model, activation):
-    """Where the jaw and eyelids take each vertex (facesim.rig): the lid closure c slides a
-    vertex in cylindrical coordinates (x, φ, r) about its eye's horizontal axis by c times
-    its (Δx, Δφ, Δr); then the jaw turns it by its weight w times θ = activation × max
+    """Where the jaw and eyelids take each vertex (facesim.rig): the lid closure c and the
+    levator's raise a slide a vertex in cylindrical coordinates (x, φ, r) about its eye's
+    horizontal axis by c Δ_close + a (1 - c) Δ_raise; then the jaw turns it by its weight w times θ = activation × max
     angle about the hinge axis. And the drive holding the lips and lid contours:
     drive × weight × min(1, 10 a) for the activation a of their control."""
     from scipy.spatial.transform import Rotation
 
     rig, p = model.rig, model.rest_position.copy()
     c = np.where(rig.lid_column >= 0, activation[np.maximum(rig.lid_column, 0)], 0.0)
+    a = np.where(rig.lid_raise_column >= 0, activation[np.maximum(rig.lid_raise_column, 0)], 0.0)
+    delta = c[:, None] * rig.lid_delta + (a * (1 - c))[:, None] * rig.lid_raise_delta
     d = p - rig.lid_centre
-    phi = np.arctan2(d[:, 1], d[:, 2]) + c * rig.lid_delta[:, 1]
-    r = np.hypot(d[:, 1], d[:, 2]) + c * rig.lid_delta[:, 2]
-    slid = np.column_stack([p[:, 0] + c * rig.lid_delta[:, 0], rig.lid_centre[:, 1] + r * np.sin(phi),
-                            rig.lid_centre[:, 2] + r * np.cos(phi)])
-    p = np.where((c != 0)[:, None], slid, p)
+    phi = np.arctan2(d[:, 1], d[:, 2]) + delta[:, 1]
+    r = np.hypot(d[:, 1], d[:, 2]) + delta[:, 2]
+    slid = np.column_stack([p[:, 0] + delta[:, 0], rig.lid_centre[:, 1] + r * np.sin(phi), rig.lid_centre[:, 2] + r * np.cos(phi)])
+    p = np.where(((c != 0) | (a != 0))[:, None], slid, p)
     if rig.jaw_column >= 0:
         angle = rig.jaw_weight * rig.jaw_max * activation[rig.jaw_column]
         p = rig.jaw_hinge + Rotation.from_rotvec(angle[:, None] * rig.jaw_axis).apply(p - rig.jaw_hinge)
     driven = rig.drive_column >= 0
-    a = activation[np.maximum(rig.drive_column, 0)]
+    a = np.maximum(activation[np.maximum(rig.drive_column, 0)], a)
     hold = np.where(driven, model.material.drive * rig.drive_weight * np.minimum(1.0, 10.0 * a), 0.0)
     return p, hold
 

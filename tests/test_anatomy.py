@@ -87,11 +87,31 @@ def test_a_blink_closes_both_eyes_without_the_lids_crossing_and_opens_them(model
         assert np.all(blink.positions[:, upper, 1] > blink.positions[:, lower, 1])
 
 
+def test_the_levator_palpebrae_raises_the_upper_lid_and_leaves_the_lower(model, mesh):
+    """AU5: the upper lid's middle rises over the eyeball (a few mm, as ICT's eyeWide),
+    the lower lid and the eye corners stay, both eyes alike, and a blink still closes the
+    eye from the raised lid."""
+    frames = 40
+    raised, *_ = run(model, ramp_table(model, frames, levator_palpebrae_r=rise(frames, 10), levator_palpebrae_l=rise(frames, 10)), 0.01)
+    final = raised[-1]
+    for upper, lower in LIDS:
+        assert 0.2 < final[upper, 1] - model.rest_position[upper, 1] < 0.5  # cm
+        assert abs(final[lower, 1] - model.rest_position[lower, 1]) < 0.03
+    for corner in (33, 133, 263, 362):
+        assert np.linalg.norm(final[corner] - model.rest_position[corner]) < 0.05
+    mirrored = (final - model.rest_position)[mirror_map(mesh.vertices, mesh.faces)] * np.array([-1.0, 1.0, 1.0])
+    assert np.abs(final - model.rest_position - mirrored).max() < 1e-6
+    both, *_ = run(model, ramp_table(model, frames, levator_palpebrae_r=np.ones(frames), eyelid_r=rise(frames, 10)), 0.01)
+    upper, lower = LIDS[0]
+    assert distance(both[-1], upper, lower) < 0.1
+
+
 def test_action_units_drive_the_jaw_eyelids_and_sphincters(model, tmp_path):
     path = tmp_path / "aus.yaml"
-    path.write_text(yaml.safe_dump({"onset": 0, "aus": {"AU26": 1.0, "AU43": "E", "AU6": 0.5, "AU18": 0.4}}))
+    path.write_text(yaml.safe_dump({"onset": 0, "aus": {"AU26": 1.0, "AU43": "E", "AU6": 0.5, "AU18": 0.4, "AU5": 0.3}}))
     last = dict(zip(model.muscles.names, activation_table(load_spec(path), model.muscles)[-1]))
     assert last["jaw"] == 0.5 and last["eyelid_l"] == last["eyelid_r"] == 1.0
+    assert last["levator_palpebrae_l"] == last["levator_palpebrae_r"] == 0.3
     assert last["orbicularis_oculi_l"] == 0.5 and last["orbicularis_oris"] == 0.4
 
 
