@@ -585,7 +585,7 @@ def main() -> int:
     text, compile_figures = compilation()
     section("Compilation, measured apart", text + "\n\nEach row is one fresh process; `cache=True` keeps compiled "
             "kernels on disk, so only the very first run on a machine pays for compilation.")
-    wall, walls, peak_mb = fresh_render_wall(1 if quick else 5, 64 if quick else 512)
+    wall, walls, peak_mb = fresh_render_wall(1 if quick else 3, 64 if quick else 512)
     section("`facesim render expressions/happy.yaml` in a fresh process, caches warm (the default head, 512² MP4)",
             f"median wall {wall:.2f} s over {len(walls)} runs: " + ", ".join(f"{w:.2f}" for w in walls) +
             f"; peak memory (maximum resident set) {peak_mb:.0f} MB")
@@ -602,7 +602,7 @@ def main() -> int:
     text, head_figures = head([64] if quick else [256, 512], 1 if quick else 3)
     section("The default head (ICT FaceKit), happy", text)
 
-    section("Datasets: samples per second, local processes and Dask", dataset_throughput(6 if quick else 200, 64 if quick else 256))
+    section("Datasets: samples per second, local processes and Dask", dataset_throughput(6 if quick else 120, 64 if quick else 256))
 
     per_core_28k = 1 / next((v for k, v in scale.items() if 20_000 < k < 40_000), float("nan")) / 1e6
     egl512 = render_figures.get(("egl", 512), render_figures.get(("egl", 64)))
