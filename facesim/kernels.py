@@ -417,7 +417,6 @@ def _back_project(model, i, fu, fv, uv, xp, out):
     magnitude = math.sqrt(fu * fu + fv * fv)
     if magnitude == 0.0:
         return False
-    g = np.empty(3)
     for k in range(model.ring_start[i], model.ring_start[i + 1]):
         a = model.ring_a[k]
         b = model.ring_b[k]
@@ -432,12 +431,14 @@ def _back_project(model, i, fu, fv, uv, xp, out):
         beta = (au * fv - av * fu) / det
         if alpha < 0.0 or beta < 0.0:
             continue
-        for d in range(3):
-            g[d] = alpha * (xp[a, d] - xp[i, d]) + beta * (xp[b, d] - xp[i, d])
+        gx = alpha * (xp[a, 0] - xp[i, 0]) + beta * (xp[b, 0] - xp[i, 0])
+        gy = alpha * (xp[a, 1] - xp[i, 1]) + beta * (xp[b, 1] - xp[i, 1])
+        gz = alpha * (xp[a, 2] - xp[i, 2]) + beta * (xp[b, 2] - xp[i, 2])
         weight = alpha * beta * det * det / (magnitude * magnitude * math.sqrt((au * au + av * av) * (bu * bu + bv * bv)))
-        scale = weight / max(math.sqrt(g[0] ** 2 + g[1] ** 2 + g[2] ** 2), LENGTH_EPS)
-        for d in range(3):
-            out[d] += scale * g[d]
+        scale = weight / max(math.sqrt(gx * gx + gy * gy + gz * gz), LENGTH_EPS)
+        out[0] += scale * gx
+        out[1] += scale * gy
+        out[2] += scale * gz
     norm = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2)
     if norm > 0.0:
         for d in range(3):
@@ -612,8 +613,8 @@ def _rig_control(model, control):
     eye's horizontal axis), then turned about the jaw hinge by w θ, into ``control.target``.
     ``control.hold`` is the extra stiffness driving the lips and lid contours,
     drive * min(1, 10 a) for the activation a of their control (a lid's: the larger of its
-    closure and its raise): zero while the jaw and lids are at rest. Then the muscles' ends, from where
-    the bones hold them (``_muscle_geometry``)."""
+    closure and its raise): zero while the jaw and lids are at rest. Then the muscles'
+    ends, from where the bones hold them (``_muscle_geometry``)."""
     activation = control.activation
     theta = model.jaw_max * activation[model.jaw_column] if model.jaw_column >= 0 else 0.0
     for i in range(model.rest_position.shape[0]):

@@ -156,7 +156,8 @@ class MuscleFile(Strict):
     @model_validator(mode="after")
     def _unique_names(self):
         seen = {"jaw"} if self.jaw else set()
-        for name in [m.name for m in self.muscles] + [e.name for e in self.eyelids] + [e.levator for e in self.eyelids if e.levator]:
+        levators = [e.levator for e in self.eyelids if e.levator]
+        for name in [m.name for m in self.muscles] + [e.name for e in self.eyelids] + levators:
             if name in seen:
                 raise ValueError(f"duplicate name {name!r}")
             seen.add(name)

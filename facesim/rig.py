@@ -14,9 +14,9 @@ acting on top.
   w is 1 on the lower lip and the rim below the hinge, 0 on the upper lip and above the
   hinge, and harmonic in between (the graph Laplacian's Dirichlet problem), so the opening
   spreads smoothly through the cheeks and the lips part without tearing the corners.
-- **Eyelids** (AU43 eyes closed, AU45 blink; AU5 upper lid raiser): each contour vertex slides over the eyeball
-  about the horizontal axis through its centre, in cylindrical coordinates (x, φ, r) about
-  that axis, to a meeting line one fifth of the way up from the lower lid (the upper lid
+- **Eyelids** (AU43 eyes closed, AU45 blink; AU5 upper lid raiser): each contour vertex
+  slides over the eyeball about the horizontal axis through its centre, in cylindrical
+  coordinates (x, φ, r) about that axis, to a meeting line one fifth of the way up from the lower lid (the upper lid
   does most of a blink), at a radius outside the eyeball. The upper target always stays
   above its lower partner, ``LID_GAP`` apart when closed, so the lids never pass through
   each other. The skin around the opening, out to ``reach`` eye widths, follows with a
@@ -186,11 +186,13 @@ def _eyelid(mesh: FaceMesh, lid, opening: np.ndarray | None, centre: np.ndarray,
     outside = np.flatnonzero(distance > (0.5 + lid.reach) * width)
     corners = np.setdiff1d(opening, contour) if opening is not None else np.zeros(0, dtype=np.int64)
     fixed = np.concatenate([contour, corners, np.setdiff1d(outside, contour)])
-    s = np.arange(1, len(lid.upper) + 1) / (len(lid.upper) + 1)  # along the upper lid, corner to corner
-    raise_upper = np.column_stack([np.zeros_like(s), lid.levator_angle * np.sin(np.pi * s), np.zeros_like(s)])
-    rest = np.zeros((len(fixed) - len(lid.upper), 3))
-    delta = harmonic(mesh, fixed, np.concatenate([delta_upper, delta_lower, rest[:len(fixed) - len(contour)]]))
-    raised = harmonic(mesh, fixed, np.concatenate([raise_upper, rest]))
+    still = np.zeros((len(fixed) - len(contour), 3))  # the eye corners and the skin beyond reach
+    delta = harmonic(mesh, fixed, np.concatenate([delta_upper, delta_lower, still]))
+    raised = np.zeros_like(delta)
+    if lid.levator:
+        s = np.arange(1, len(lid.upper) + 1) / (len(lid.upper) + 1)  # along the upper lid, corner to corner
+        raise_upper = np.column_stack([np.zeros_like(s), lid.levator_angle * np.sin(np.pi * s), np.zeros_like(s)])
+        raised = harmonic(mesh, fixed, np.concatenate([raise_upper, np.zeros_like(delta_lower), still]))
     region = np.setdiff1d(np.flatnonzero(distance <= (0.5 + lid.reach) * width), corners)
     return region, delta[region], raised[region], contour
 
