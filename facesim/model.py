@@ -154,6 +154,19 @@ class Model:
     resolution: float = 1.0  # s: skin area per vertex over the default face's (module docstring)
     length_unit: float = 1.0  # √s: the unit of stretch in the non-linear springs
     arrays: ModelArrays | None = field(default=None, repr=False, compare=False)  # all of the above, as the kernels read it
+    factors: dict = field(default_factory=dict, repr=False, compare=False)  # the implicit step's, per step size
+
+    def preconditioner(self, h: float):
+        """The implicit step's factorised preconditioner at step ``h`` for a skin with
+        bending (facesim.solver.rest_preconditioner), factorised the first time a run asks
+        for it; empty (Jacobi, or the thesis's update) otherwise."""
+        from .solver import no_factor, rest_preconditioner
+
+        if not (self.arrays.implicit and self.arrays.bending > 0):
+            return no_factor()
+        if h not in self.factors:
+            self.factors[h] = rest_preconditioner(self, h)
+        return self.factors[h]
 
     @property
     def vertex_count(self) -> int:

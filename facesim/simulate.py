@@ -152,12 +152,13 @@ def run(
     table = np.ascontiguousarray(activations, dtype=np.float64)
     control = kernels.control(model.arrays, np.zeros(table.shape[1]))
     work, forces = kernels.workspace(n), kernels.forces(model.arrays)
+    factor = model.preconditioner(float(dt) / model.material.substeps)
     piece = max(1, int(STEPS_PER_CALL / (model.material.substeps * n)))
     status, frame, element = kernels.OK, -1, -1
     for start in range(0, frames, piece):  # Python between pieces: Ctrl-C and SIGTERM act within about 0.2 s
         status, frame, element = solver._simulate(
             model.arrays, table, start, min(frames, start + piece), float(dt), int(model.material.substeps), energy_limit,
-            stop_on_inversion, state, control, work, forces, out,
+            stop_on_inversion, state, control, work, forces, factor, out,
         )
         if status != kernels.OK:
             break

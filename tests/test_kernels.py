@@ -362,10 +362,12 @@ def test_links_are_the_jacobian_of_the_springs_tissue_and_bending(model, rng):
     assert_close(product.reshape(-1), dense_stiffness(forces.links, len(x)) @ p.reshape(-1))
 
 
-def test_implicit_step_solves_its_system(rng):
+@pytest.mark.parametrize("bending", [0.0, 100.0], ids=["jacobi", "rest-factor"])
+def test_implicit_step_solves_its_system(rng, bending):
     """The conjugate gradients reach the solution of (m + Δt C + Δt² K) V' = m V + Δt F +
-    Δt² K V (solver docstring), solved densely from the same terms, at the free vertices."""
-    model = model_for(spec("happy", material=material(tolerance=1e-10, iterations=2000)))
+    Δt² K V (solver docstring), solved densely from the same terms, at the free vertices,
+    with either preconditioner: Jacobi, or the factorised rest system (a skin with bending)."""
+    model = model_for(spec("happy", material=material(tolerance=1e-10, iterations=2000, bending=bending)))
     x, _ = perturbed(model, rng, scale=0.03)
     x[model.pinned] = model.rest_position[model.pinned]
     v = 0.3 * rng.standard_normal(x.shape)
@@ -375,7 +377,8 @@ def test_implicit_step_solves_its_system(rng):
     control = K.control(model.arrays, activation)
     h, n = 0.01, model.vertex_count
     state, work, forces = K.State(x.copy(), v.copy()), K.workspace(n), K.forces(model.arrays)
-    krylov = solver.Krylov(*(np.empty_like(x) for _ in range(5)))
+    krylov = solver.Krylov(*(np.empty_like(x) for _ in range(5)), np.empty(3 * n), model.preconditioner(h))
+    assert (krylov.factor.lower_start.size > 1) == (bending > 0)
     iterations = solver._implicit_step(model.arrays, state, control, h, np.empty_like(x), work, forces, krylov)
     assert 1 < iterations < 2000
 
