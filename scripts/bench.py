@@ -472,50 +472,127 @@ def head(sizes: list[int], repeats: int) -> tuple[str, dict]:
     return text, figures
 
 
+PROFILE_TERMS = ["springs (eq. 3.6)", "edge repulsion (eq. 3.7)", "bending", "damping (eq. 3.10)", "hypodermis and rig drive",
+                 "muscles (eq. 3.1-3.4, 3.21-3.25)", "all force terms (`solver._forces`)",
+                 "one conjugate-gradient product A p", "the preconditioner, applied once"]
+
+
+def _looped():
+    """A compiled loop over one kernel, so a profile's figures carry no call overhead."""
+    from numba import njit
+
+    from facesim import kernels, solver
+
+    @njit
+    def looped(which, repeats, model, xp, control, work, forces, krylov, h):
+        for _ in range(repeats):
+            if which == 0:
+                kernels._spring_forces(model, xp, forces)
+            elif which == 1:
+                kernels._edge_repulsion_forces(model, xp, forces)
+            elif which == 2:
+                kernels._bending_forces(model, xp, control, forces)
+            elif which == 3:
+                kernels._damping_forces(model, forces)
+            elif which == 4:
+                kernels._tissue_forces(model, xp, control, forces)
+            elif which == 5:
+                kernels._muscle_forces(model, xp, control, work, forces)
+            elif which == 6:
+                solver._forces(model, xp, control, work, forces)
+            elif which == 7:
+                solver._system_product(model, forces, h, krylov.p, krylov.q)
+            else:
+                solver._precondition(krylov, krylov.r, krylov.z)
+    return looped
+
+
+def profile(repeats: int) -> tuple[str, dict]:
+    """Per step, each term's kernel and the implicit step's parts, on happy at frame 12 of the
+    default head and of the Hopper face (the thesis's model, implicit), and the conjugate
+    gradients' iterations per step over the 35 frames."""
+    from facesim import kernels, solver
+
+    looped = _looped()
+    columns, figures = {}, {}
+    for label, spec in (("the default head", solved_by("happy")), ("the Hopper face, the thesis's model",
+                                                                   thesis_spec("happy", solver="implicit"))):
+        model = model_for(spec)
+        arrays, n, h = model.arrays, model.vertex_count, spec.dt / model.material.substeps
+        factored = arrays.bending > 0
+        factorised = median(timed(lambda: solver.rest_preconditioner(model, h), 3)) if factored else 0.0
+        factor = solver.rest_preconditioner(model, h) if factored else solver.no_factor()
+        table_ = activation_table(spec, model.muscles)
+        state = kernels.State(model.rest_position.copy(), np.zeros((n, 3)))
+        control = kernels.control(arrays, table_[0])
+        work, forces, xp = kernels.workspace(n), kernels.forces(arrays), np.empty((n, 3))
+        krylov = solver.Krylov(*(np.empty((n, 3)) for _ in range(5)), np.empty(3 * n), factor)
+        iterations = []
+        for frame, row in enumerate(table_):
+            control.activation[:] = row
+            kernels._rig_control(arrays, control)
+            for _ in range(model.material.substeps):
+                iterations.append(solver._implicit_step(arrays, state, control, h, xp, work, forces, krylov))
+            if frame == 12:
+                snapshot = state.x.copy(), state.v.copy(), control.activation.copy()
+        x, v, activation = snapshot
+        control.activation[:] = activation
+        kernels._rig_control(arrays, control)
+        solver._predict(arrays, kernels.State(x.copy(), v.copy()), control, h, xp)
+        solver._forces(arrays, xp, control, work, forces)
+        solver._jacobi(arrays, forces, h, krylov.diagonal)
+        krylov.r[:] = forces.force
+        krylov.p[:] = v
+        times = []
+        for which in range(len(PROFILE_TERMS)):
+            looped(which, 1, arrays, xp, control, work, forces, krylov, h)
+            count = 50 * repeats
+            times.append(median(timed(lambda: looped(which, count, arrays, xp, control, work, forces, krylov, h), 3)) / count)
+        columns[label] = [f"{t * 1e6:,.1f}" for t in times] + [
+            f"{np.median(iterations):.0f} (at most {max(iterations)})",
+            f"{factorised * 1e3:,.0f} ({factor.lower_value.size + factor.upper_value.size:,} entries)"
+            if factored else "Jacobi: none"]
+        figures[label] = dict(zip(PROFILE_TERMS, times), iterations=float(np.median(iterations)))
+    rows = [[name] + [columns[label][k] for label in columns] for k, name in
+            enumerate(PROFILE_TERMS + ["conjugate-gradient iterations per step (median)",
+                                       "the rest system factorised, once per model and step size (ms)"])]
+    return table(["per step, µs (happy, frame 12)"] + list(columns), rows), figures
+
+
 ANALYSIS = """### Where the missed targets stand, and what would close them
 
-Profiles measured inside Numba (each kernel looped in compiled code, so no call overhead),
-on happy's 468-vertex face at frame 12:
-
-| per step | µs |
-|---|---|
-| all force terms (`solver._forces`) | 101 |
-| - edge repulsion, 2,556 pairs (eq. 3.7) | 49 |
-| - muscles: projection, flood fills, back-projection (eq. 3.1-3.4, 3.21-3.25) | 29 |
-| - springs, 1,320 (eq. 3.6) | 16 |
-| - hypodermis and rig drive | 1 |
-| implicit step: Jacobi preconditioner | 25 |
-| implicit step: one conjugate-gradient iteration (K p over 3,876 links, 3 dot products) | 32 |
-| implicit step: iterations to a residual 1e-3 of the first | 6-9 |
+The per-step profile above (each kernel looped in compiled code, so no call overhead) names
+where a step's time goes.
 
 - **Simulation, 2 ms for happy on the Hopper face.** The implicit solver takes one step
-  per frame where the thesis's update takes four, but its step costs about 3.5 of theirs:
-  the forces (101 µs) plus the preconditioner and about 8 iterations of a product as
-  costly as the springs and repulsion together. Per pair the kernels are scalar code at
-  about 6-19 ns (a square root, two divisions, the (1 + s²)^γ factor and a scatter to
-  three vertices). What would close it: links whose block is written once per step in
-  structure-of-arrays form and applied by a vectorised product (float32, 8 lanes), a
-  block-Jacobi preconditioner to halve the iterations, and the muscles' flood fills cached
-  between steps (their regions barely change within a frame).
+  per frame where the thesis's update takes four, but its step is the force terms plus
+  several conjugate-gradient iterations, each a product as costly as the springs and the
+  repulsion together. Per pair the kernels are scalar code at about 6-19 ns (a square
+  root, two divisions, the (1 + s²)^γ factor and a scatter to three vertices). What would
+  close it: the links' blocks written once per step in structure-of-arrays form and
+  applied by a vectorised product (float32, 8 lanes), and the muscles' back-projection
+  (eq. 3.22-3.25, for every vertex of every active muscle's region, every step) done once
+  per vertex for the sum of the muscles' 2D forces, a departure from the thesis's
+  per-muscle projection that would have to be calibrated again.
 - **10 million vertex-steps per second per core at 28k vertices; `prange` 1.7x.** About
-  4 million (the thesis's step, Loop-subdivided face): the per-pair cost above, plus cache
-  misses once the working set (about 200 bytes per vertex) leaves the L2 cache above 10k
-  vertices. `prange` was not built: the simulated mesh of every face facesim renders is
-  468 vertices, where a parallel region's start (several µs, about ten per step) costs
+  1.6 million (the thesis's step, Loop-subdivided face): the per-pair cost above, plus
+  cache misses once the working set (about 200 bytes per vertex) leaves the L2 cache above
+  10k vertices. `prange` was not built: the simulated mesh of every face facesim renders
+  is 468 vertices, where a parallel region's start (several µs, about ten per step) costs
   more than it saves, and during a render Mesa's llvmpipe already runs on both cores.
   What would close it for large meshes: a vertex order along a space-filling curve
   (scipy's reverse Cuthill-McKee) and per-thread force buffers over the springs and pairs.
 - **25 frames per second end to end on the head at 512², antialiased.** Rendering is the
   cost: 26,719 vertices in nine materials through pyrender's PBR shader in Mesa's
   software rasteriser. Any multisampled framebuffer costs about 108 ms a frame (2 or 4
-  samples alike); facesim now supersamples (1024², one sample, averaged: about 90 ms), and
-  without antialiasing a frame is about 35 ms. Simulation (0.3 ms a frame) and encoding
-  (overlapped) are small. What would close it: a GPU, or a lighter shader (one light,
-  no PBR) and drawing only the parts in view.
+  samples alike); facesim supersamples (1024², one sample, averaged: about 90 ms), and
+  without antialiasing a frame is about 35 ms. Simulation (about 1 ms a frame) and
+  encoding (overlapped) are small. What would close it: a GPU, or a lighter shader (one
+  light, no PBR) and drawing only the parts in view.
 - **3 s for `facesim render` in a fresh process.** About 1 s of imports (facesim, Numba,
   pyrender, trimesh, scipy), 0.5 s to load the head and check it, 0.3 s for the GL
   context, then 35 frames at about 90 ms. The head's skin weights (1.2 s to solve) are
-  now read from an on-disk cache in 0.1 s. What would close it: the frame cost above, or
+  read from an on-disk cache in 0.1 s. What would close it: the frame cost above, or
   a long-lived render server keeping the imports and the context warm.
 """
 
@@ -582,6 +659,11 @@ def main() -> int:
             "the same model at eight steps per frame with its conjugate gradients run to 1e-8. Simulation: median "
             "of warm runs. Apex: each expression's strongest frame held 200 frames, the mean of the last 50, the "
             "largest vertex distance between the two.")
+    text, profile_figures = profile(1 if quick else 5)
+    section("Where a step's time goes", text + "\n\nThe default head's skin has bending, so its conjugate "
+            "gradients are preconditioned by its system at rest, factorised once (facesim.solver); the Hopper "
+            "face's, in the thesis's model, by the system's diagonal. Medians of compiled loops; iterations over "
+            "happy's 35 frames.")
     text, compile_figures = compilation()
     section("Compilation, measured apart", text + "\n\nEach row is one fresh process; `cache=True` keeps compiled "
             "kernels on disk, so only the very first run on a machine pays for compilation.")
@@ -629,7 +711,7 @@ def main() -> int:
         ["the head: per-frame render against the bare floor", "≤ 1.2x",
          ", ".join(f"{h['ours'] / h['floor']:.2f}x at {size}²" for size, h in head_figures.items())],
     ]
-    figures = dict(table_31=f31, solvers=solver_figures, numba_ratio=ratio, compile=compile_figures, fresh_wall=wall,
+    figures = dict(table_31=f31, solvers=solver_figures, profile=profile_figures, numba_ratio=ratio, compile=compile_figures, fresh_wall=wall,
                    fresh_peak_mb=peak_mb, scaling={str(k): v for k, v in scale.items()},
                    render={f"{key[0]}-{key[1]}": v for key, v in render_figures.items() if key != "processes"},
                    head={str(k): v for k, v in head_figures.items()})
