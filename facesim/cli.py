@@ -22,6 +22,8 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_
                   help="Anatomy-based facial expression animation: simulate a muscle-driven face and render it offscreen.")
 mesh_app = typer.Typer(no_args_is_help=True, help="Face meshes: build one from a photo, check one.")
 app.add_typer(mesh_app, name="mesh")
+face_app = typer.Typer(no_args_is_help=True, help="Your own face on a full head: fit ICT's head to a photo.")
+app.add_typer(face_app, name="face")
 
 
 def notice(message: str) -> None:
@@ -487,6 +489,25 @@ def mesh_from_photo_command(
     check_destination(output, force)
     built = mesh_from_photo(photo, output, symmetric=symmetrise, replace=force)
     typer.echo(f"wrote {output}: {built.vertex_count} vertices, {len(built.faces)} triangles", err=True)
+
+
+@face_app.command("from-photo")
+@handled
+def face_from_photo_command(
+    photo: Path = typer.Argument(..., help="a portrait photo (JPEG, PNG), the face at least 100 pixels across"),
+    output: Path = typer.Option(..., "-o", "--output", help="directory to write: head.obj/.mtl/.png, face.yaml, muscles.yaml"),
+    force: bool = FORCE,
+):
+    """Fit the head (ICT's identity modes) and a camera to a photo's face and bake the
+    photo into its texture. Needs facesim[photo]."""
+    from .own_face import FACE_FILES, face_from_photo
+
+    check_destination(output, force, directory=True, names=FACE_FILES)
+    record = face_from_photo(photo, output, replace=force, notice=notice)
+    fit = record["landmarks"]
+    typer.echo(f"wrote {output}: the head fitted to {fit['face_width_pixels']:.0f} pixels of face, landmarks within "
+               f"{100 * fit['median_residual_face_widths']:.1f}% of its width (median), "
+               f"{100 * fit['p90_residual_face_widths']:.1f}% (90th percentile)", err=True)
 
 
 def apex_frame(animation) -> int:

@@ -258,9 +258,7 @@ def head_figure(head: Head, model) -> Figure:
     parts = []
     eyes, guards = [], []
     for material in HEAD_PARTS:
-        tri = head.triangles_of(material)
-        if material.startswith("M_Sclera"):  # ICT's sclera runs on over the iris as a clear cornea
-            tri = tri[~_over_iris(x, head, material[len("M_Sclera"):].lower(), tri)]
+        tri = drawn_triangles(head, material)
         if HEAD_PARTS[material][0] is not None:
             colour[np.unique(tri)] = HEAD_PARTS[material][0]
         parts.append(Part(material, tri, HEAD_PARTS[material][1]))
@@ -280,6 +278,15 @@ def head_figure(head: Head, model) -> Figure:
         follow_rows=follow_rows, follow=follow, follow_gain=gain, jaw_rows=lower_rows[weight > 0], jaw_weight=weight[weight > 0],
         jaw_hinge=model.rig.jaw_hinge, jaw_axis=model.rig.jaw_axis, eyes=tuple(eyes), guards=tuple(guards), neck=np.array(HEAD_NECK),
     )
+
+
+def drawn_triangles(head: Head, material: str) -> np.ndarray:
+    """The triangles of one of ICT's materials as the figure draws them: all of them, but
+    for the sclera, which runs on over the iris as a clear cornea, left out there."""
+    tri = head.triangles_of(material)
+    if material.startswith("M_Sclera"):
+        tri = tri[~_over_iris(head.vertices, head, material[len("M_Sclera"):].lower(), tri)]
+    return tri
 
 
 def _iris_axis(x: np.ndarray, head: Head, side: str):

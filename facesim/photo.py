@@ -63,20 +63,30 @@ def tessellation() -> np.ndarray:
     return triples[:, :, 0]
 
 
-def detect_landmarks(image: np.ndarray, source: str) -> np.ndarray:
-    """(468, 3) landmarks in pixels: x right, y down, z away from the camera (image-width units)."""
+#: Faces looked for in a photo; the largest is used.
+MAX_FACES = 4
+
+
+def detect_landmarks(image: np.ndarray, source: str, notice=None) -> np.ndarray:
+    """(468, 3) landmarks in pixels of the photo's largest face: x right, y down, z away
+    from the camera (image-width units). ``notice`` is told when there are several."""
     height, width = image.shape[:2]
     with quiet_stderr():
         import mediapipe as mp
 
         with mp.solutions.face_mesh.FaceMesh(
-            static_image_mode=True, max_num_faces=1, refine_landmarks=False, min_detection_confidence=0.5
+            static_image_mode=True, max_num_faces=MAX_FACES, refine_landmarks=False, min_detection_confidence=0.5
         ) as face_mesh:
             result = face_mesh.process(np.ascontiguousarray(image[:, :, :3]))
     if not result.multi_face_landmarks:
         raise InputError(f"{source}: no face found in the image")
-    landmarks = result.multi_face_landmarks[0].landmark
-    return np.array([(p.x * width, p.y * height, p.z * width) for p in landmarks], dtype=np.float64)
+    faces = [np.array([(p.x * width, p.y * height, p.z * width) for p in face.landmark], dtype=np.float64)
+             for face in result.multi_face_landmarks]
+    sizes = [float(np.ptp(face[:, :2], axis=0).max()) for face in faces]
+    largest = int(np.argmax(sizes))
+    if len(faces) > 1 and notice is not None:
+        notice(f"{source}: {len(faces)} faces found; using the largest ({sizes[largest]:.0f} pixels across)")
+    return faces[largest]
 
 
 @contextlib.contextmanager

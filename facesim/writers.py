@@ -58,12 +58,15 @@ def handle_termination() -> None:
         signal.signal(signum, raise_terminated)
 
 
-def _is_facesim_output(path: Path, directory: bool) -> bool:
-    """Whether an existing ``path`` is something facesim writes and ``--force`` may replace."""
+def _is_facesim_output(path: Path, directory: bool, names: frozenset | None = None) -> bool:
+    """Whether an existing ``path`` is something facesim writes and ``--force`` may replace:
+    a directory of frames, or (``names``) of exactly those files."""
     if path.is_symlink():
         return False
     if directory:
-        return path.is_dir() and all(FRAME.fullmatch(p.name) and p.is_file() for p in path.iterdir())
+        def ours(p):
+            return p.is_file() and (p.name in names if names is not None else FRAME.fullmatch(p.name))
+        return path.is_dir() and all(ours(p) for p in path.iterdir())
     if not path.is_file():
         return False
     magic = MAGIC.get(path.suffix.lower(), (0, b""))
@@ -75,8 +78,9 @@ def _is_facesim_output(path: Path, directory: bool) -> bool:
     return head[offset:] == start
 
 
-def check_destination(path: Path, force: bool, directory: bool = False) -> None:
-    """Raise InputError unless ``path`` may be written (step 1 of the module's rule)."""
+def check_destination(path: Path, force: bool, directory: bool = False, names: frozenset | None = None) -> None:
+    """Raise InputError unless ``path`` may be written (step 1 of the module's rule); a
+    directory facesim writes holds frames, or exactly the files ``names``."""
     resolved = path.resolve()
     cwd = Path.cwd().resolve()
     if resolved == cwd or resolved in cwd.parents:
@@ -86,8 +90,9 @@ def check_destination(path: Path, force: bool, directory: bool = False) -> None:
         return
     if not force:
         raise InputError(f"{path}: already exists (use --force to overwrite)")
-    if not _is_facesim_output(path, directory):
-        what = "a directory of frame_NNNN.png files" if directory else f"a {path.suffix or 'file'} file facesim wrote"
+    if not _is_facesim_output(path, directory, names):
+        what = (f"a directory of {', '.join(sorted(names))}" if names else "a directory of frame_NNNN.png files") \
+            if directory else f"a {path.suffix or 'file'} file facesim wrote"
         raise InputError(f"{path}: exists and is not {what}; --force replaces only facesim's own outputs, "
                          "so move or remove it yourself")
     _check_parent(path)
