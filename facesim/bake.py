@@ -7,7 +7,7 @@ inner sphere (ICT's M_Iris, painted whole: pupil, iris and the white around them
 lays its parts out in UV tiles of their own (the face in [0, 1]², the back of the head in
 [1, 2] x [0, 1], ...) and the eyes' shells in the face's square, over one another;
 :func:`atlas_uv` moves each part's triangles, as the figure draws them
-(facesim.figure.drawn_triangles: the sclera without its clear cornea), into its tile. Teeth, gums, tongue and lashes keep facesim's materials: a photo of a
+(facesim.figure.drawn_rows: the sclera without its clear cornea), into its tile. Teeth, gums, tongue and lashes keep facesim's materials: a photo of a
 closed mouth does not show them.
 
 Steps (:func:`bake`):
@@ -58,15 +58,12 @@ FEATHER = 12
 def atlas_uv(head) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The head's textured triangles as drawn: (k,) their indices, (k,) their tile, and
     (k, 3, 2) their corners' UVs in the atlas's [0, 1]² (v up, as OBJ has it)."""
-    from .figure import drawn_triangles
+    from .figure import drawn_rows
 
     rows = len(TILES) // COLUMNS
     rows_of, tiles, uvs = [], [], []
     for index, material in enumerate(TILES):
-        triangles = drawn_triangles(head, material)
-        keep = np.flatnonzero(head.triangle_material == head.materials.index(material))
-        drawn = {tuple(t) for t in triangles.tolist()}
-        keep = keep[[tuple(t) in drawn for t in head.triangles[keep].tolist()]]  # with their UV corners
+        keep = drawn_rows(head, material)
         uv = head.uv[head.triangle_uv[keep]].astype(np.float64)  # (k, 3, 2)
         uv -= np.floor(uv.mean(axis=1, keepdims=True))  # into [0, 1]² of its own ICT tile
         uv = np.clip(uv, 0.0, 1.0)
@@ -90,6 +87,13 @@ def _barycentric(px, py, ax, ay, bx, by, cx, cy):
 
 
 @njit(**NUMBA_OPTIONS)
+def _span(a, b, c, size):
+    """The pixels (first, last) whose centres a triangle with coordinates a, b, c along one
+    axis may cover, within [0, size)."""
+    return max(int(np.floor(min(a, b, c))), 0), min(int(np.ceil(max(a, b, c))), size - 1)
+
+
+@njit(**NUMBA_OPTIONS)
 def _depth_buffer(pixels, depth, triangles, group, out, owner):
     """out (h, w): the largest depth (nearest the camera) of the triangles over each pixel
     centre, -inf where none is; owner (h, w): that triangle's ``group``, -1 where none is."""
@@ -98,10 +102,8 @@ def _depth_buffer(pixels, depth, triangles, group, out, owner):
     owner[:] = -1
     for t in range(triangles.shape[0]):
         a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
-        x0 = max(int(np.floor(min(pixels[a, 0], pixels[b, 0], pixels[c, 0]))), 0)
-        x1 = min(int(np.ceil(max(pixels[a, 0], pixels[b, 0], pixels[c, 0]))), w - 1)
-        y0 = max(int(np.floor(min(pixels[a, 1], pixels[b, 1], pixels[c, 1]))), 0)
-        y1 = min(int(np.ceil(max(pixels[a, 1], pixels[b, 1], pixels[c, 1]))), h - 1)
+        x0, x1 = _span(pixels[a, 0], pixels[b, 0], pixels[c, 0], w)
+        y0, y1 = _span(pixels[a, 1], pixels[b, 1], pixels[c, 1], h)
         for y in range(y0, y1 + 1):
             for x in range(x0, x1 + 1):
                 l0, l1, l2 = _barycentric(x + 0.5, y + 0.5, pixels[a, 0], pixels[a, 1], pixels[b, 0], pixels[b, 1],
@@ -129,14 +131,14 @@ def _sample(photo, x, y, out):
 
 
 @njit(**NUMBA_OPTIONS)
-def _bake(texel_uv, corners, material, group, pixels, depth, facing, vertex_colour, zbuffer, owner, photo, tolerance,
+def _bake(texel_uv, corners, tile, group, pixels, depth, facing, vertex_colour, zbuffer, owner, photo, tolerance,
           grazing_low, grazing_high, colour, weight, covered, base):
     """Step 2 of the module docstring over the triangles whose corners (k, 3) into the
     head's vertices have atlas texel coordinates ``texel_uv`` (k, 3, 2): ``colour`` (H, W, 3)
     and ``weight`` (H, W) written where the photo shows the texel (the nearest surface at
     its pixel is of the triangle's ``group`` and not much nearer than it: an eyeball
     under its lid lies closer behind the skin than any depth tolerance), ``covered`` (H, W) the
-    triangle's ``material`` (its tile) + 1 and ``base`` (H, W, 3) the corners'
+    triangle's ``tile`` + 1 and ``base`` (H, W, 3) the corners'
     ``vertex_colour`` interpolated, on every texel it covers."""
     h, w = zbuffer.shape
     rows, cols = colour.shape[0], colour.shape[1]
@@ -146,16 +148,14 @@ def _bake(texel_uv, corners, material, group, pixels, depth, facing, vertex_colo
         ua, va = texel_uv[t, 0, 0], texel_uv[t, 0, 1]
         ub, vb = texel_uv[t, 1, 0], texel_uv[t, 1, 1]
         uc, vc = texel_uv[t, 2, 0], texel_uv[t, 2, 1]
-        x0 = max(int(np.floor(min(ua, ub, uc))), 0)
-        x1 = min(int(np.ceil(max(ua, ub, uc))), cols - 1)
-        y0 = max(int(np.floor(min(va, vb, vc))), 0)
-        y1 = min(int(np.ceil(max(va, vb, vc))), rows - 1)
+        x0, x1 = _span(ua, ub, uc, cols)
+        y0, y1 = _span(va, vb, vc, rows)
         for y in range(y0, y1 + 1):
             for x in range(x0, x1 + 1):
                 l0, l1, l2 = _barycentric(x + 0.5, y + 0.5, ua, va, ub, vb, uc, vc)
                 if l0 < -1e-3 or l1 < -1e-3 or l2 < -1e-3:
                     continue
-                covered[y, x] = material[t] + 1
+                covered[y, x] = tile[t] + 1
                 for ch in range(3):
                     base[y, x, ch] = l0 * vertex_colour[a, ch] + l1 * vertex_colour[b, ch] + l2 * vertex_colour[c, ch]
                 px = l0 * pixels[a, 0] + l1 * pixels[b, 0] + l2 * pixels[c, 0]
@@ -176,9 +176,10 @@ def _bake(texel_uv, corners, material, group, pixels, depth, facing, vertex_colo
                     colour[y, x, ch] = sample[ch]
 
 
-def bake(head, camera, photo: np.ndarray, vertex_colour: np.ndarray) -> np.ndarray:
+def bake(head, camera, photo: np.ndarray, vertex_colour: np.ndarray, atlas=None) -> np.ndarray:
     """The atlas (2 TILE, 3 TILE, 3) uint8 of ``head`` (facesim.head.Head, the fitted
-    identity) seen by ``camera`` (facesim.fit.Camera) in ``photo`` (h, w, 3) uint8.
+    identity) seen by ``camera`` (facesim.fit.Camera) in ``photo`` (h, w, 3) uint8, its
+    layout ``atlas`` (``atlas_uv(head)``, found when not given).
     ``vertex_colour`` (N, 3+) in [0, 1], facesim's own colours of the head
     (facesim.figure), paints the eyes' inner spheres where the photo does not show them,
     and any part the photo does not show at all."""
@@ -192,7 +193,7 @@ def bake(head, camera, photo: np.ndarray, vertex_colour: np.ndarray) -> np.ndarr
     pixels = camera.project(x)
     depth = camera.turned(x)[:, 2].copy()
     facing = np.einsum("ij,ij->i", normals, camera.toward_camera(x))
-    rows, tile, uv = atlas_uv(head)
+    rows, tile, uv = atlas_uv(head) if atlas is None else atlas
     corners = np.ascontiguousarray(head.triangles[rows])
     group = np.asarray(SURFACE, dtype=np.int64)[tile]
     zbuffer, owner = np.empty((camera.height, camera.width)), np.empty((camera.height, camera.width), dtype=np.int64)
@@ -202,17 +203,15 @@ def bake(head, camera, photo: np.ndarray, vertex_colour: np.ndarray) -> np.ndarr
     texel = np.empty_like(uv)
     texel[:, :, 0] = uv[:, :, 0] * shape[1]
     texel[:, :, 1] = (1.0 - uv[:, :, 1]) * shape[0]  # image rows run down, v up
-    material = tile.astype(np.int64)
     colour, weight, covered = np.zeros(shape + (3,)), np.zeros(shape), np.zeros(shape, dtype=np.int64)
     tone = np.zeros(shape + (3,))
     image = np.ascontiguousarray(photo[:, :, :3], dtype=np.float64) / 255.0
     tolerance = max(DEPTH_TOLERANCE[0], DEPTH_TOLERANCE[1] / camera.scale)
-    _bake(texel, corners, material, group, pixels, depth, facing, np.ascontiguousarray(vertex_colour[:, :3], dtype=np.float64),
+    _bake(texel, corners, tile.astype(np.int64), group, pixels, depth, facing, np.ascontiguousarray(vertex_colour[:, :3], dtype=np.float64),
           zbuffer, owner, image, tolerance, GRAZING[0], GRAZING[1], colour, weight, covered, tone)
-    for index, name in enumerate(TILES[:2]):  # the skin takes its seen median; the eyes stay painted
-        seen = (covered == (1 if name == "M_BackHead" else index + 1)) & (weight >= 0.99)  # the back: the face's skin
-        if seen.sum() > 50:
-            tone[covered == index + 1] = np.median(colour[seen], axis=0)
+    seen = (covered == 1) & (weight >= 0.99)  # the face's skin seen face-on
+    if seen.sum() > 50:  # its tone on the face and the back of the head; the eyes stay painted
+        tone[(covered == 1) | (covered == 2)] = np.median(colour[seen], axis=0)
     # the photo fades into the tone over FEATHER texels from where it stops (texels no
     # triangle covers are no edge)
     inside = (weight > 0) | (covered == 0)

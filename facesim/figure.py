@@ -258,7 +258,7 @@ def head_figure(head: Head, model) -> Figure:
     parts = []
     eyes, guards = [], []
     for material in HEAD_PARTS:
-        tri = drawn_triangles(head, material)
+        tri = head.triangles[drawn_rows(head, material)]
         if HEAD_PARTS[material][0] is not None:
             colour[np.unique(tri)] = HEAD_PARTS[material][0]
         parts.append(Part(material, tri, HEAD_PARTS[material][1]))
@@ -280,13 +280,13 @@ def head_figure(head: Head, model) -> Figure:
     )
 
 
-def drawn_triangles(head: Head, material: str) -> np.ndarray:
-    """The triangles of one of ICT's materials as the figure draws them: all of them, but
-    for the sclera, which runs on over the iris as a clear cornea, left out there."""
-    tri = head.triangles_of(material)
+def drawn_rows(head: Head, material: str) -> np.ndarray:
+    """The indices of one of ICT's materials' triangles that the figure draws: all of
+    them, but for the sclera, which runs on over the iris as a clear cornea, left out there."""
+    rows = np.flatnonzero(head.triangle_material == head.materials.index(material))
     if material.startswith("M_Sclera"):
-        tri = tri[~_over_iris(head.vertices, head, material[len("M_Sclera"):].lower(), tri)]
-    return tri
+        rows = rows[~_over_iris(head.vertices, head, material[len("M_Sclera"):].lower(), head.triangles[rows])]
+    return rows
 
 
 def _iris_axis(x: np.ndarray, head: Head, side: str):

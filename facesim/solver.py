@@ -30,12 +30,14 @@ state and the frame's control, and advances the state in place:
   applied by two triangular solves, ``_factor_solve``). Bending couples each vertex to
   its neighbours' neighbours and makes the system too stiff for Jacobi: on the head's
   smile that took 46 iterations a step, the rest system (1.6% from the moving one)
-  about 4, and the whole run 43 ms instead of 88. Without bending Jacobi takes about 8
+  about 4, and the whole run 40 ms instead of 88. Without bending Jacobi takes about 8
   and costs 3n a product where the factor's fill-in grows faster than n (the Hopper
-  face subdivided twice: 3.3 million entries, a run 3.6 times slower). With K whole (and positive semi-definite: the
-  links clamp a compressed spring's sideways term) the step is stable at one step per
-  frame where the per-vertex update needs four; at the apex of the eight thesis
-  expressions the two agree within 2% of the largest displacement (tests/test_solver.py).
+  face subdivided twice: 3.3 million entries, a run 3.6 times slower).
+
+  With K whole (and positive semi-definite: the links clamp a compressed spring's
+  sideways term) the step is stable at one step per frame where the per-vertex update
+  needs four; at the apex of the eight thesis expressions the two agree within 2% of
+  the largest displacement (tests/test_solver.py).
 
 ``_simulate`` runs Algorithm 3.4.1: ``substeps`` steps per frame, the jaw and eyelids
 moving linearly within a frame, and per-frame diagnostics (finiteness, inverted
@@ -141,6 +143,13 @@ def _system_product(model, forces, h, p, out):
 
 
 @njit(**NUMBA_OPTIONS)
+def _link_block(links, l, d, e):
+    """Entry (d, e) of link l's 3x3 block B = along a aᵀ + across (I - a aᵀ) (kernels.Links)."""
+    across = links.across[l]
+    return (links.along[l] - across) * links.axis[l, d] * links.axis[l, e] + (across if d == e else 0.0)
+
+
+@njit(**NUMBA_OPTIONS)
 def _jacobi(model, forces, h, out):
     """The diagonal of A = m + Δt C + Δt² K, per coordinate."""
     links = forces.links
@@ -148,12 +157,11 @@ def _jacobi(model, forces, h, out):
         for d in range(3):
             out[i, d] = model.mass + h * forces.damping[i] + h * h * links.diagonal[i]
     for l in range(links.along.shape[0]):
-        across = links.across[l]
         for k in range(4):
             w2 = h * h * links.weight[l, k] * links.weight[l, k]
             node = links.node[l, k]
             for d in range(3):
-                out[node, d] += w2 * (across + (links.along[l] - across) * links.axis[l, d] * links.axis[l, d])
+                out[node, d] += w2 * _link_block(links, l, d, d)
 
 
 @njit(**NUMBA_OPTIONS)
@@ -170,7 +178,6 @@ def _system_entries(model, forces, h, rows, columns, values):
             values[count] = 1.0 if model.pinned[i] else free
             count += 1
     for l in range(links.along.shape[0]):
-        across, along = links.across[l], links.along[l]
         for a in range(4):
             p = links.node[l, a]
             for b in range(4):
@@ -180,10 +187,9 @@ def _system_entries(model, forces, h, rows, columns, values):
                 w = h * h * links.weight[l, a] * links.weight[l, b]
                 for d in range(3):
                     for e in range(3):
-                        block = (along - across) * links.axis[l, d] * links.axis[l, e] + (across if d == e else 0.0)
                         rows[count] = 3 * p + d
                         columns[count] = 3 * q + e
-                        values[count] = w * block
+                        values[count] = w * _link_block(links, l, d, e)
                         count += 1
     return count
 
@@ -245,9 +251,15 @@ def _factor_solve(factor, r, scratch, z):
 
 
 @njit(**NUMBA_OPTIONS)
+def _factored(krylov):
+    """Whether the step has the rest system's factor (else Jacobi)."""
+    return krylov.factor.lower_start.shape[0] > 1
+
+
+@njit(**NUMBA_OPTIONS)
 def _precondition(krylov, r, z):
     """z = M⁻¹ r for the step's preconditioner (module docstring)."""
-    if krylov.factor.lower_start.shape[0] > 1:
+    if _factored(krylov):
         _factor_solve(krylov.factor, r, krylov.scratch, z)
     else:
         for i in range(r.shape[0]):
@@ -272,7 +284,7 @@ def _implicit_step(model, state, control, h, xp, work, forces, krylov):
     _forces(model, xp, control, work, forces)
     x, v = state.x, state.v
     r, z, p, q = krylov.r, krylov.z, krylov.p, krylov.q
-    if krylov.factor.lower_start.shape[0] <= 1:
+    if not _factored(krylov):
         _jacobi(model, forces, h, krylov.diagonal)
     for i in range(x.shape[0]):  # V' = V to start: r = b - A V = Δt (F - C V)
         for d in range(3):
@@ -321,9 +333,9 @@ def _simulate(model, activations, start, stop, dt, substeps, energy_limit, stop_
     ``start`` to ``stop`` of ``activations`` (frames, muscles and controls): the caller
     runs a long animation in pieces, so that Ctrl-C and SIGTERM act between them. The
     state is advanced in place; ``control`` holds the previous step's bones; ``factor`` is
-    the implicit step's factorised preconditioner (``rest_preconditioner``), or empty. Within a
-    frame the controls (jaw, eyelids) move linearly from the previous frame's values, so
-    the targets never jump.
+    the implicit step's factorised preconditioner (``rest_preconditioner``), or empty.
+    Within a frame the controls (jaw, eyelids) move linearly from the previous frame's
+    values, so the targets never jump.
 
     Writes ``out`` (Diagnostics). Returns (status, frame, element): OK, or the first frame
     that is NOT_FINITE (element: a vertex), INVERTED (a triangle; only when

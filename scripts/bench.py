@@ -521,7 +521,7 @@ def profile(repeats: int) -> tuple[str, dict]:
         arrays, n, h = model.arrays, model.vertex_count, spec.dt / model.material.substeps
         factored = arrays.bending > 0
         factorised = median(timed(lambda: solver.rest_preconditioner(model, h), 3)) if factored else 0.0
-        factor = solver.rest_preconditioner(model, h) if factored else solver.no_factor()
+        factor = model.preconditioner(h)
         table_ = activation_table(spec, model.muscles)
         state = kernels.State(model.rest_position.copy(), np.zeros((n, 3)))
         control = kernels.control(arrays, table_[0])
