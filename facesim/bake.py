@@ -19,11 +19,15 @@ Steps (:func:`bake`):
    colour (bilinear) when its depth is within ``DEPTH_TOLERANCE`` of the nearest surface
    there, with a weight that fades from 1 to 0 as the surface turns away from the camera
    (``GRAZING``: at a grazing angle one pixel smears over many texels);
-3. what no pixel shows takes a tone: the skin's (the median of the face's texels seen
-   face-on) on the face and the back of the head, and facesim's own paint on the eyes
-   (the white, and the pupil and iris of the inner sphere, which a gaze turns into
-   view: the few pixels a photo gives an eye's white are mostly the lids' shadow); the photo's colour is blended into it over ``FEATHER`` texels
-   from the edge of what was seen, so no seam shows where the photo ends.
+3. what no pixel shows takes a tone: facesim's own colours scaled to the photo's skin
+   (the median of the face's texels seen face-on) on the face and the back of the head
+   (so the inside of the mouth stays dark and the inner lips lip-coloured), and
+   facesim's own paint on the eyes (the white, and the pupil and iris of the inner
+   sphere, which a gaze turns into view: the few pixels a photo gives an eye's white
+   are mostly the lids' shadow). Seen texels keep the photo's colour exactly (so the
+   neutral head through the photo's camera is the photo); unseen ones take the nearest
+   seen colour, fading into the tone over ``FEATHER`` texels, so no seam shows where the
+   photo ends.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ import numpy as np
 from numba import njit
 
 from .config import NUMBA_OPTIONS
+from .render import SKIN
 
 #: The atlas's tiles: the ICT material each holds, in order left to right, top to bottom.
 TILES = ("M_Face", "M_BackHead", "M_ScleraLeft", "M_IrisLeft", "M_ScleraRight", "M_IrisRight")
@@ -132,14 +137,15 @@ def _sample(photo, x, y, out):
 
 @njit(**NUMBA_OPTIONS)
 def _bake(texel_uv, corners, tile, group, pixels, depth, facing, vertex_colour, zbuffer, owner, photo, tolerance,
-          grazing_low, grazing_high, colour, weight, covered, base):
+          grazing_low, grazing_high, colour, weight, covered, base, visible):
     """Step 2 of the module docstring over the triangles whose corners (k, 3) into the
     head's vertices have atlas texel coordinates ``texel_uv`` (k, 3, 2): ``colour`` (H, W, 3)
     and ``weight`` (H, W) written where the photo shows the texel (the nearest surface at
     its pixel is of the triangle's ``group`` and not much nearer than it: an eyeball
     under its lid lies closer behind the skin than any depth tolerance), ``covered`` (H, W) the
     triangle's ``tile`` + 1 and ``base`` (H, W, 3) the corners'
-    ``vertex_colour`` interpolated, on every texel it covers."""
+    ``vertex_colour`` interpolated, on every texel it covers; ``visible`` (H, W) set where
+    the texel is the nearest surface at its pixel, at whatever angle."""
     h, w = zbuffer.shape
     rows, cols = colour.shape[0], colour.shape[1]
     sample = np.empty(3)
@@ -166,6 +172,7 @@ def _bake(texel_uv, corners, tile, group, pixels, depth, facing, vertex_colour, 
                 d = l0 * depth[a] + l1 * depth[b] + l2 * depth[c]
                 if owner[iy, ix] != group[t] or d < zbuffer[iy, ix] - tolerance:
                     continue
+                visible[y, x] = True
                 cosine = l0 * facing[a] + l1 * facing[b] + l2 * facing[c]
                 k = min(max((cosine - grazing_low) / (grazing_high - grazing_low), 0.0), 1.0)
                 if k <= weight[y, x]:
@@ -176,13 +183,17 @@ def _bake(texel_uv, corners, tile, group, pixels, depth, facing, vertex_colour, 
                     colour[y, x, ch] = sample[ch]
 
 
-def bake(head, camera, photo: np.ndarray, vertex_colour: np.ndarray, atlas=None) -> np.ndarray:
+def bake(head, camera, photo: np.ndarray, vertex_colour: np.ndarray, atlas=None) -> tuple[np.ndarray, np.ndarray]:
     """The atlas (2 TILE, 3 TILE, 3) uint8 of ``head`` (facesim.head.Head, the fitted
     identity) seen by ``camera`` (facesim.fit.Camera) in ``photo`` (h, w, 3) uint8, its
     layout ``atlas`` (``atlas_uv(head)``, found when not given).
     ``vertex_colour`` (N, 3+) in [0, 1], facesim's own colours of the head
     (facesim.figure), paints the eyes' inner spheres where the photo does not show them,
-    and any part the photo does not show at all."""
+    and any part the photo does not show at all. Also returns the atlas's --onto alpha
+    (2 TILE, 3 TILE) uint8: where the photo saw a texel, how fully (the GRAZING weight:
+    near the silhouette the photo, not the render, shows the head's edge, and the hair
+    or background beyond it); 255 wherever the photo did not see it (hidden or turned
+    away: only the render can show it)."""
     from scipy.ndimage import distance_transform_edt
 
     from .kernels import _vertex_normals
@@ -204,21 +215,28 @@ def bake(head, camera, photo: np.ndarray, vertex_colour: np.ndarray, atlas=None)
     texel[:, :, 0] = uv[:, :, 0] * shape[1]
     texel[:, :, 1] = (1.0 - uv[:, :, 1]) * shape[0]  # image rows run down, v up
     colour, weight, covered = np.zeros(shape + (3,)), np.zeros(shape), np.zeros(shape, dtype=np.int64)
-    tone = np.zeros(shape + (3,))
+    tone, visible = np.zeros(shape + (3,)), np.zeros(shape, dtype=np.bool_)
     image = np.ascontiguousarray(photo[:, :, :3], dtype=np.float64) / 255.0
     tolerance = max(DEPTH_TOLERANCE[0], DEPTH_TOLERANCE[1] / camera.scale)
     _bake(texel, corners, tile.astype(np.int64), group, pixels, depth, facing, np.ascontiguousarray(vertex_colour[:, :3], dtype=np.float64),
-          zbuffer, owner, image, tolerance, GRAZING[0], GRAZING[1], colour, weight, covered, tone)
+          zbuffer, owner, image, tolerance, GRAZING[0], GRAZING[1], colour, weight, covered, tone, visible)
     seen = (covered == 1) & (weight >= 0.99)  # the face's skin seen face-on
-    if seen.sum() > 50:  # its tone on the face and the back of the head; the eyes stay painted
-        tone[(covered == 1) | (covered == 2)] = np.median(colour[seen], axis=0)
-    # the photo fades into the tone over FEATHER texels from where it stops (texels no
-    # triangle covers are no edge)
-    inside = (weight > 0) | (covered == 0)
-    alpha = weight * np.clip(distance_transform_edt(inside) / FEATHER, 0.0, 1.0)
-    result = alpha[:, :, None] * colour + (1.0 - alpha[:, :, None]) * tone
-    # texels no triangle covers take the nearest covered one's colour, so that filtering
+    if seen.sum() > 50:  # facesim's colours of the skin scaled to the photo's skin; the eyes stay painted
+        skin = (covered == 1) | (covered == 2)
+        tone[skin] *= np.median(colour[seen], axis=0) / np.asarray(SKIN[:3])
+    # what was seen keeps the photo's colour; beyond it the nearest colour seen fades into
+    # the tone over FEATHER texels
+    full = weight >= 0.99
+    if full.any():
+        distance, (iy, ix) = distance_transform_edt(~full, return_indices=True)
+        fade = np.clip(distance / FEATHER, 0.0, 1.0)[:, :, None]
+        beyond = (1.0 - fade) * colour[iy, ix] + fade * tone
+    else:
+        beyond = tone
+    result = weight[:, :, None] * colour + (1.0 - weight[:, :, None]) * beyond
+    onto = np.where(visible, weight, 1.0)
+    # texels no triangle covers take the nearest covered one's values, so that filtering
     # at an island's edge does not bleed black
     _, (iy, ix) = distance_transform_edt(covered == 0, return_indices=True)
-    result = result[iy, ix]
-    return np.clip(np.rint(result * 255.0), 0, 255).astype(np.uint8)
+    return (np.clip(np.rint(result[iy, ix] * 255.0), 0, 255).astype(np.uint8),
+            np.clip(np.rint(onto[iy, ix] * 255.0), 0, 255).astype(np.uint8))

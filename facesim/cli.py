@@ -54,11 +54,16 @@ def handled(command):
 
 
 def settings_from(size: str, camera: str, wireframe: bool = False, show_muscles: bool = False, antialias: bool = True,
-                  framing: str = "face"):
+                  framing: str = "face", look: str = "clay", onto: Path | None = None):
     from .render import RenderSettings, parse_size
 
     width, height = parse_size(size)
-    return RenderSettings(width, height, camera, wireframe, show_muscles, antialias, framing)
+    return RenderSettings(width, height, camera, wireframe, show_muscles, antialias, framing, look, onto)
+
+
+def look_for(look: Optional[str], spec) -> str:
+    """--look, or by default the photo look for a head with a face directory, clay otherwise."""
+    return look or ("photo" if spec.face is not None else "clay")
 
 
 def positive(value: Optional[int], name: str) -> None:
@@ -79,6 +84,9 @@ MESH = typer.Option(None, "--mesh", help="face mesh to use instead of the spec's
 MUSCLES = typer.Option(None, "--muscles", help="muscle file to use instead of the spec's")
 IDENTITY = typer.Option(None, "--identity", help="the head's identity instead of the spec's: a seed for the "
                         "weights of ICT's 100 identity modes (standard normal)")
+FACE = typer.Option(None, "--face", help="a face directory (facesim face from-photo): your head, its muscles and texture")
+LOOK = typer.Option(None, "--look", help="photo (a face directory's baked photo, unlit) or clay (facesim's materials, "
+                    "lit); default: photo with a face directory")
 
 
 def identity_seed(identity: Optional[int]) -> Optional[int]:
@@ -105,6 +113,10 @@ def render(
     mesh: Optional[Path] = MESH,
     muscles: Optional[Path] = MUSCLES,
     identity: Optional[int] = IDENTITY,
+    face: Optional[Path] = FACE,
+    look: Optional[str] = LOOK,
+    onto: Optional[Path] = typer.Option(None, "--onto", help="render through the face's fitted camera into this photo "
+                                        "(the one it was fitted to), at its size: the photo comes alive"),
     blend: Optional[str] = typer.Option(None, "--blend", help="blend expressions, e.g. happy=0.6,surprise=0.4"),
 ):
     """Simulate one expression spec (or a blend of expressions) and render it."""
@@ -116,13 +128,22 @@ def render(
     jobs = capped_jobs(jobs, notice)
     if fps is not None and not 0 < fps <= 240:
         raise InputError(f"--fps: must be between 0 and 240, got {fps}")
-    settings = settings_from(size, camera, wireframe, show_muscles, antialias, framing)
     if spec is None and blend is None:
         raise InputError("render: give a SPEC file, --blend, or both")
     loaded = load_spec(spec) if spec else blend_spec(blend)
     if spec and blend:
         loaded = loaded.with_overrides(include=loaded.include + blend_spec(blend).include)
-    loaded = loaded.with_overrides(mesh=mesh, muscles=muscles, identity=identity_seed(identity))
+    loaded = loaded.with_overrides(mesh=mesh, muscles=muscles, identity=identity_seed(identity), face=face)
+    if onto is not None:  # the frames take the photo's size, and the photo is checked against the face before any work
+        from .own_face import onto_photo
+        from .photo import read_image
+
+        if loaded.face_directory is None:
+            raise InputError("--onto: needs a face directory (--face DIR, or face: in the spec)")
+        height, width = read_image(onto).shape[:2]
+        onto_photo(loaded.face_directory, onto)
+        size = f"{width}x{height}"
+    settings = settings_from(size, camera, wireframe, show_muscles, antialias, framing, look_for(look, loaded), onto)
     output = output or Path("out") / f"{loaded.title}.mp4"
     check_output(output, force, settings)
     animation = simulate(loaded, notice=notice)

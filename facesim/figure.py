@@ -28,6 +28,7 @@ import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
 
 from . import cache, mesh
+from .bake import TILES, atlas_uv
 from .head import Head
 from .mesh import FaceMesh, smooth_interpolation, unique_edges
 from .render import IRIS, PUPIL, SCLERA, SKIN, _rotation
@@ -69,6 +70,7 @@ class Part:
     name: str
     triangles: np.ndarray  # (t, 3) into Figure.rest
     roughness: float = 0.75
+    uv: np.ndarray | None = None  # (t, 3, 2) its corners in a face directory's texture atlas (facesim.bake), if textured
 
 
 @dataclass(frozen=True)
@@ -257,11 +259,13 @@ def head_figure(head: Head, model) -> Figure:
     colour[teeth] = TEETH
     parts = []
     eyes, guards = [], []
+    _, tile, atlas = atlas_uv(head)
     for material in HEAD_PARTS:
         tri = head.triangles[drawn_rows(head, material)]
         if HEAD_PARTS[material][0] is not None:
             colour[np.unique(tri)] = HEAD_PARTS[material][0]
-        parts.append(Part(material, tri, HEAD_PARTS[material][1]))
+        uv = atlas[tile == TILES.index(material)] if material in TILES else None
+        parts.append(Part(material, tri, HEAD_PARTS[material][1], uv))
     colour[:, 3] = 1.0
     for side in ("left", "right"):
         colour[head.part(f"eyelashes_{side}"), 3] = _lash_alpha(x, head, side)

@@ -79,6 +79,11 @@ class Camera:
         return np.column_stack([self.width / 2 + p * c[:, 0] + self.translation[0],
                                 self.height / 2 - p * c[:, 1] - self.translation[1]])
 
+    def resized(self, width: int, height: int) -> "Camera":
+        """The same camera for the photo resized to ``width`` x ``height``."""
+        ratio = width / self.width
+        return Camera(self.rotation, self.translation * ratio, self.scale * ratio, self.kappa, int(width), int(height))
+
     def toward_camera(self, points: np.ndarray) -> np.ndarray:
         """(k, 3) unit vectors from head points toward the camera, in the head's frame."""
         if self.kappa == 0.0:

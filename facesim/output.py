@@ -96,9 +96,9 @@ def arrows_for(animation: Animation) -> np.ndarray | None:
     ])
 
 
-def _render_chunk(rest, faces, settings, backend, figure, positions, arrows, pose, jaw):
+def _render_chunk(rest, faces, settings, backend, figure, face, positions, arrows, pose, jaw):
     """Frames rendered in a worker process, by the process's one shared renderer."""
-    renderer = shared_renderer(rest, faces, settings, backend, figure)
+    renderer = shared_renderer(rest, faces, settings, backend, figure, face)
     return np.stack([renderer.render(p, None if arrows is None else arrows[k], None if pose is None else pose[k], jaw[k])
                      for k, p in enumerate(positions)])
 
@@ -136,7 +136,7 @@ def iter_frames(animation: Animation, settings: RenderSettings, backend: str = "
     pose = animation.pose
     chunks = [(animation.positions[a:b], None if arrows is None else arrows[a:b], None if pose is None else pose[a:b],
                animation.jaw[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
-    fixed = [(animation.rest, animation.faces, settings, backend, animation.figure)] * len(chunks)
+    fixed = [(animation.rest, animation.faces, settings, backend, animation.figure, animation.face)] * len(chunks)
     with worker_pool(jobs) as pool:
         for (positions, *_), images in zip(chunks, pool.map(_render_chunk, *zip(*fixed), *zip(*chunks))):
             yield from images

@@ -10,15 +10,23 @@ under a temporary name, read back, then renamed):
   its textured parts (the skin, the eyes) mapped into the baked atlas, the others (teeth,
   gums and tongue, lashes, the eyes' shells) with facesim's colours; Blender and trimesh
   load it as it is;
+- ``head_onto.png``: for ``--onto``, how much of each texel the render shows over the
+  photo (facesim.bake: less where the photo saw it at a grazing angle);
 - ``face.yaml``: the identity weights (ICT's 100 modes), the fitted camera, the photo it
   came from and how well the landmarks fit (the median and 90th percentile of their
   distance from MediaPipe's, in face widths);
 - ``muscles.yaml``: the head's muscle file, by landmark index, which fits any identity.
+
+A face directory read back (:func:`load_face_directory`, ``--face DIR`` or ``face:`` in a
+spec) gives the simulation its identity and muscles, the renderer its texture
+(``--look photo``) and, for ``--onto PHOTO``, the camera the photo was taken with.
 """
 
 from __future__ import annotations
 
 import shutil
+from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -26,9 +34,104 @@ import numpy as np
 from .errors import InputError
 
 #: The files of a face directory (what ``--force`` may replace).
-FACE_FILES = frozenset({"head.obj", "head.mtl", "head.png", "face.yaml", "muscles.yaml"})
+FACE_FILES = frozenset({"head.obj", "head.mtl", "head.png", "head_onto.png", "face.yaml", "muscles.yaml"})
 #: Materials without texture, with the MTL colour each gets (facesim.figure's).
 HIDDEN = ("M_LacrimalFluid", "M_EyeBlend", "M_EyeOcclusion")
+
+
+@dataclass(frozen=True, eq=False)
+class FaceDirectory:
+    """A face directory read back: where it is, the identity weights (100,) as a tuple,
+    the fitted camera (facesim.fit.Camera) and its files."""
+
+    path: Path
+    identity: tuple
+    camera: object
+
+    @property
+    def texture(self) -> Path:
+        return self.path / "head.png"
+
+    @property
+    def onto_alpha(self) -> Path:
+        return self.path / "head_onto.png"
+
+    @property
+    def muscles(self) -> Path:
+        return self.path / "muscles.yaml"
+
+
+def load_face_directory(path: str | Path, where: str = "--face") -> FaceDirectory:
+    """A face directory written by ``facesim face from-photo``, checked: every file
+    there, face.yaml's identity (100 finite weights) and camera, the texture a readable
+    image of the atlas's size. One-line InputError naming the file otherwise."""
+    path = Path(path).resolve()
+    stamp = tuple((path / name).stat().st_mtime_ns if (path / name).is_file() else 0 for name in sorted(FACE_FILES))
+    return _load_face_directory(path, where, stamp)
+
+
+@lru_cache(maxsize=8)
+def _load_face_directory(path: Path, where: str, stamp: tuple) -> FaceDirectory:
+    """load_face_directory's work, once per directory as its files stand (``stamp``)."""
+    import yaml
+    from PIL import Image
+
+    from .bake import COLUMNS, TILE, TILES
+    from .fit import Camera
+    from .head import IDENTITY_MODES
+
+    if not path.is_dir():
+        raise InputError(f"{where}: {path}: not a face directory (make one with `facesim face from-photo PHOTO -o DIR`)")
+    missing = sorted(name for name in FACE_FILES if not (path / name).is_file())
+    if missing:
+        raise InputError(f"{path}: not a face directory: {', '.join(missing)} missing")
+    record_path = path / "face.yaml"
+    try:
+        record = yaml.safe_load(record_path.read_text())
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise InputError(f"{record_path}: not valid YAML ({type(exc).__name__})") from None
+    if not isinstance(record, dict):
+        raise InputError(f"{record_path}: expected a mapping with identity and camera")
+    identity = record.get("identity")
+    try:
+        weights = np.asarray(identity, dtype=np.float64)
+    except (TypeError, ValueError):
+        weights = np.zeros(0)
+    if weights.shape != (IDENTITY_MODES,) or not np.isfinite(weights).all():
+        raise InputError(f"{record_path}: identity: expected {IDENTITY_MODES} finite weights")
+    if not isinstance(record.get("camera"), dict):
+        raise InputError(f"{record_path}: camera: expected the fitted camera (a mapping)")
+    camera = Camera.from_dict(record["camera"], f"{record_path}: camera")
+    expected = (TILE * COLUMNS, TILE * len(TILES) // COLUMNS)
+    for name in ("head.png", "head_onto.png"):
+        try:
+            with Image.open(path / name) as image:
+                size = image.size
+                image.verify()
+        except Exception as exc:  # Pillow raises many kinds for a damaged file
+            raise InputError(f"{path / name}: not a readable image ({type(exc).__name__})") from None
+        if size != expected:
+            raise InputError(f"{path / name}: expected the {expected[0]}x{expected[1]} atlas face from-photo bakes, "
+                             f"got {size[0]}x{size[1]}")
+    return FaceDirectory(path, tuple(float(w) for w in weights), camera)
+
+
+def onto_photo(face: FaceDirectory, photo: str | Path, size: tuple[int, int] | None = None):
+    """--onto: the photo (h, w, 3) float in [0, 255] and the face's fitted camera for it.
+    The photo must be the one the face was fitted to, or that photo resized (the camera is
+    scaled with it); ``size`` (w, h), when given, must be the photo's."""
+    from .photo import read_image
+
+    image = read_image(photo)
+    height, width = image.shape[:2]
+    if size is not None and tuple(size) != (width, height):
+        raise InputError(f"--onto: {photo} is {width}x{height}; the frames must be the photo's size, got {size[0]}x{size[1]}")
+    camera = face.camera
+    ratio = width / camera.width
+    if abs(height / camera.height - ratio) > 0.01 * ratio:
+        raise InputError(f"--onto: {photo} is {width}x{height}, but {face.path.name} was fitted to a photo of "
+                         f"{camera.width}x{camera.height}: give that photo (or it resized)")
+    return image.astype(np.float64), camera.resized(width, height)
 
 
 def _colours():
@@ -103,7 +206,7 @@ def face_from_photo(photo: str | Path, output: str | Path, replace: bool = False
     model = _model(HEAD.resolve(), HEAD_MUSCLES.resolve(), Material(), identity)
     head = model.mesh.head
     atlas = atlas_uv(head)
-    texture = bake(head, fit.camera, image, figure_for(model).colour, atlas)
+    texture, onto = bake(head, fit.camera, image, figure_for(model).colour, atlas)
     uv_rows, _, uv = atlas
     residual = fit.residual
     record = dict(
@@ -124,13 +227,14 @@ def face_from_photo(photo: str | Path, output: str | Path, replace: bool = False
         vertices = read_obj_vertices(directory / "head.obj")
         if vertices.shape != head.vertices.shape or np.abs(vertices - head.vertices).max() > 1e-5:
             raise InputError(f"{output}: the head written does not read back")
-        if iio.imread(directory / "head.png").shape != texture.shape:
+        if iio.imread(directory / "head.png").shape != texture.shape or iio.imread(directory / "head_onto.png").shape != onto.shape:
             raise InputError(f"{output}: the texture written does not read back")
 
     with atomic_path(output, directory=True, replace=replace, verify=verify) as tmp:
         (tmp / "head.obj").write_text(obj)
         (tmp / "head.mtl").write_text(mtl)
         iio.imwrite(tmp / "head.png", texture)
+        iio.imwrite(tmp / "head_onto.png", onto)
         (tmp / "face.yaml").write_text(yaml.safe_dump(record, sort_keys=False))
         shutil.copyfile(HEAD_MUSCLES, tmp / "muscles.yaml")
     return record

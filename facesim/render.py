@@ -19,6 +19,7 @@ import ctypes.util
 import os
 import sys
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numba import njit
@@ -38,6 +39,13 @@ CAMERAS = {"front": 0.0, "three-quarter": 35.0, "profile": 90.0}
 #: What a head's frame holds: its face (the simulated skin, brow to chin: expressions are
 #: read there), or the whole head and shoulders.
 FRAMINGS = ("face", "head")
+#: How a head looks: facesim's materials under a key and a fill light (clay), or a face
+#: directory's baked photo (photo), drawn unlit: the photo's own light is in its colours.
+LOOKS = ("clay", "photo")
+#: In the photo look the parts a photo does not texture (teeth, gums and tongue) keep their
+#: colours, shaded once at rest by the key light's direction: this much ambient, the rest
+#: by the cosine to the light.
+PHOTO_AMBIENT = 0.45
 
 SKIN = (0.86, 0.66, 0.55, 1.0)
 BACKGROUND = (0.93, 0.93, 0.95, 1.0)
@@ -68,6 +76,8 @@ class RenderSettings:
     show_muscles: bool = False
     antialias: bool = True
     framing: str = "face"
+    look: str = "clay"
+    onto: Path | None = None  # a photo to render into, through its face directory's fitted camera
 
     def __post_init__(self):
         if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192):
@@ -76,6 +86,8 @@ class RenderSettings:
             raise InputError(f"--camera: expected one of {', '.join(CAMERAS)}, got {self.camera!r}")
         if self.framing not in FRAMINGS:
             raise InputError(f"--framing: expected one of {', '.join(FRAMINGS)}, got {self.framing!r}")
+        if self.look not in LOOKS:
+            raise InputError(f"--look: expected one of {', '.join(LOOKS)}, got {self.look!r}")
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -142,12 +154,12 @@ def _single_sample(renderer) -> None:
 
 @njit(**NUMBA_OPTIONS)
 def _downsample(image, factor, out):
-    """The mean of each ``factor`` x ``factor`` block of ``image`` (H, W, 3) uint8 into
-    ``out`` (H / factor, W / factor, 3): a box filter, 4 samples per pixel at factor 2."""
+    """The mean of each ``factor`` x ``factor`` block of ``image`` (H, W, C) uint8 into
+    ``out`` (H / factor, W / factor, C): a box filter, 4 samples per pixel at factor 2."""
     count = factor * factor
     for y in range(out.shape[0]):
         for x in range(out.shape[1]):
-            for c in range(3):
+            for c in range(out.shape[2]):
                 total = count // 2
                 for dy in range(factor):
                     for dx in range(factor):
@@ -198,14 +210,49 @@ def _openings(rest: np.ndarray, faces: np.ndarray) -> tuple[list[np.ndarray], np
     return eyes, (loops[mouth] if mouth is not None else None)
 
 
+def _texture_vertices(triangles: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A textured part's vertices, one per (figure vertex, texture coordinate) pair: a
+    vertex where the atlas's islands meet has several. Returns (m,) their figure rows,
+    (m, 2) their UVs and the triangles (t, 3) over them."""
+    corners = np.column_stack([triangles.reshape(-1).astype(np.float64), uv.reshape(-1, 2)])
+    unique, local = np.unique(corners, axis=0, return_inverse=True)
+    return unique[:, 0].astype(np.int64), unique[:, 1:], local.reshape(-1, 3)
+
+
+def _fitted_camera(camera, factor: int, pyrender) -> tuple:
+    """The pyrender camera and its pose in the head's frame for a fitted camera
+    (facesim.fit.Camera), in a viewport ``factor`` times the photo's size: a pinhole
+    1/κ away on the head's turned +z axis, focal length s/κ and principal point
+    (W/2 + tₓ, H/2 - tᵧ) pixels, or, for κ = 0, an orthographic view of W/s x H/s cm."""
+    turn = camera.rotation.T  # the camera's axes in the head's frame
+    pose = np.eye(4)
+    pose[:3, :3] = turn
+    if camera.kappa > 1e-6:
+        distance = 1.0 / camera.kappa
+        view = pyrender.IntrinsicsCamera(factor * camera.scale * distance, factor * camera.scale * distance,
+                                         factor * (camera.width / 2 + camera.translation[0]),
+                                         factor * (camera.height / 2 - camera.translation[1]),
+                                         znear=max(distance - 60.0, 1.0), zfar=distance + 60.0)
+        pose[:3, 3] = turn @ np.array([0.0, 0.0, distance])
+    else:
+        view = pyrender.OrthographicCamera(camera.width / (2 * camera.scale), camera.height / (2 * camera.scale), znear=1.0, zfar=200.0)
+        pose[:3, 3] = turn @ np.array([-camera.translation[0] / camera.scale, -camera.translation[1] / camera.scale, 100.0])
+    return view, pose
+
+
 class FaceRenderer:
     """A pyrender scene of one face, rendered offscreen frame after frame."""
 
     def __init__(self, rest: np.ndarray, faces: np.ndarray, settings: RenderSettings = RenderSettings(), backend: str = "auto",
-                 figure=None):
+                 figure=None, face=None):
         """A face mesh ``rest``/``faces`` (a mask, drawn with eyeballs and a mouth cavity
         behind its openings) or, with ``figure`` (facesim.figure), a whole head driven
-        by its simulation mesh ``rest``."""
+        by its simulation mesh ``rest``; ``face`` (facesim.own_face.FaceDirectory), the
+        face directory of that head, for the photo look and --onto."""
+        if (settings.look == "photo" or settings.onto is not None) and (figure is None or face is None):
+            what = "--onto" if settings.onto is not None else "--look photo"
+            raise InputError(f"{what}: needs a face directory (--face DIR, or face: in the spec; "
+                             "make one with `facesim face from-photo`)")
         self.backend = use_backend(backend)
         import pyrender
         import trimesh
@@ -230,7 +277,7 @@ class FaceRenderer:
             self._neck = np.array([(low[0] + high[0]) / 2, low[1] + NECK_HEIGHT * (high[1] - low[1]), low[2]])
             framed = rest
         else:
-            self._add_figure(scene, figure, pyrender)
+            self._add_figure(scene, figure, pyrender, face if settings.look == "photo" else None)
             self._neck = figure.neck
             framed = rest if settings.framing == "face" else figure.rest
         self._arrows = self._lines(scene, np.repeat(rest, 2, axis=0), ARROW) if settings.show_muscles else None
@@ -238,16 +285,28 @@ class FaceRenderer:
         self._edges = FaceMesh(rest, faces).edges if figure is not None and settings.wireframe else None
         self._wire = None if self._edges is None else self._lines(scene, rest[self._edges.ravel()], WIRE)
 
+        # lines (wireframe, arrows) are one pixel wide: supersampled they would fade to half
+        lines = settings.wireframe or settings.show_muscles
+        supersample = settings.antialias and not lines and max(settings.width, settings.height) <= SUPERSAMPLE_LIMIT
+        self._factor = SUPERSAMPLE if supersample else 1
         centre = (framed.min(axis=0) + framed.max(axis=0)) / 2
         extent = np.ptp(framed, axis=0)
         fov = np.radians(25.0)
         distance = 0.62 * max(extent[1], extent[0] * settings.height / settings.width) / np.tan(fov / 2) + extent[2] / 2
         yaw = np.radians(CAMERAS[settings.camera])
         eye = centre + distance * np.array([-np.sin(yaw), 0.0, np.cos(yaw)])
-        camera = pyrender.PerspectiveCamera(yfov=fov, aspectRatio=settings.width / settings.height, znear=1.0, zfar=10 * distance)
         self._centre, self._distance, self._yaw = centre, distance, yaw
         self._toward_camera = WIRE_LIFT * (eye - centre) / np.linalg.norm(eye - centre)
-        self._camera = scene.add(camera, pose=_look_at(eye, centre))
+        self._backdrop = None
+        if settings.onto is None:
+            camera = pyrender.PerspectiveCamera(yfov=fov, aspectRatio=settings.width / settings.height, znear=1.0, zfar=10 * distance)
+            self._camera = scene.add(camera, pose=_look_at(eye, centre))
+        else:
+            from .own_face import onto_photo
+
+            self._backdrop, fitted = onto_photo(face, settings.onto, (settings.width, settings.height))
+            view, pose = _fitted_camera(fitted, self._factor, pyrender)
+            self._camera = scene.add(view, pose=pose)
         self._lights = [
             scene.add(pyrender.DirectionalLight(color=(1.0, 0.97, 0.92), intensity=KEY_LIGHT),
                       pose=_look_at(centre + np.array([-0.6, 0.7, 1.0]), centre)),
@@ -255,10 +314,6 @@ class FaceRenderer:
                       pose=_look_at(centre + np.array([0.9, -0.1, 0.6]), centre)),
         ]
         self._scene = scene
-        # lines (wireframe, arrows) are one pixel wide: supersampled they would fade to half
-        lines = settings.wireframe or settings.show_muscles
-        supersample = settings.antialias and not lines and max(settings.width, settings.height) <= SUPERSAMPLE_LIMIT
-        self._factor = SUPERSAMPLE if supersample else 1
         try:
             self._renderer = pyrender.OffscreenRenderer(self._factor * settings.width, self._factor * settings.height)
         except Exception as exc:
@@ -270,6 +325,10 @@ class FaceRenderer:
             _single_sample(self._renderer._renderer)
         wireframe = settings.wireframe and figure is None
         self._flags = pyrender.RenderFlags.ALL_WIREFRAME if wireframe else pyrender.RenderFlags.NONE
+        if settings.look == "photo":
+            self._flags |= pyrender.RenderFlags.FLAT
+        if settings.onto is not None:
+            self._flags |= pyrender.RenderFlags.RGBA
         self._renderer.render(self._scene, flags=self._flags)  # uploads the buffers once
 
     def _lines(self, scene, points: np.ndarray, colour) -> "pyrender.Primitive":
@@ -280,24 +339,54 @@ class FaceRenderer:
         scene.add(pyrender.Mesh([lines]), parent_node=self._head)
         return lines
 
-    def _add_figure(self, scene, figure, pyrender) -> None:
+    def _add_figure(self, scene, figure, pyrender, face=None) -> None:
         """One primitive per part of the figure, each over its own vertices, coloured per
         vertex; smooth normals over the whole figure, so seams between parts that share
-        vertices (face, scalp, neck) do not show."""
+        vertices (face, scalp, neck) do not show. With ``face`` (the photo look) the parts
+        the atlas holds are textured by its baked photo, their vertices split where the
+        atlas's islands meet (``_texture_vertices``); the eyelashes are left out (the
+        photo's own are in the texture), and the other parts' colours are shaded once at
+        rest (``PHOTO_AMBIENT``), the whole drawn unlit."""
         self._faces = np.ascontiguousarray(figure.triangles, dtype=np.int64)
         self._normals = np.empty_like(figure.rest)
         _vertex_normals(figure.rest, self._faces, self._normals)
+        texture = None
+        if face is not None:  # with --onto, the atlas's alpha says how much of each texel is drawn over the photo
+            import imageio.v3 as iio
+
+            image = iio.imread(face.texture)[:, :, :3]
+            if self.settings.onto is not None:
+                image = np.dstack([image, iio.imread(face.onto_alpha)])
+            # No mipmaps: the atlas is the photo magnified several times (the face's 1024 texels
+            # against its hundreds of pixels), so it has nothing to alias, and mipmaps average
+            # across the islands' seams (they showed as dotted lines along them)
+            linear = pyrender.Sampler(magFilter=pyrender.constants.GLTF.LINEAR, minFilter=pyrender.constants.GLTF.LINEAR)
+            texture = pyrender.Texture(source=image, source_channels="RGBA" if image.shape[2] == 4 else "RGB", sampler=linear)
         self._parts = []
         for part in figure.parts:
-            rows, local = np.unique(part.triangles, return_inverse=True)
-            see_through = bool((figure.colour[rows, 3] < 1).any())  # eyelashes fade to their tips
-            material = pyrender.MetallicRoughnessMaterial(baseColorFactor=(1.0, 1.0, 1.0, 1.0), metallicFactor=0.0,
-                                                          roughnessFactor=part.roughness, doubleSided=True,
-                                                          alphaMode="BLEND" if see_through else "OPAQUE")
-            primitive = pyrender.Primitive(positions=figure.rest[rows], normals=self._normals[rows], color_0=figure.colour[rows],
-                                           indices=local.reshape(-1, 3), material=material)
+            if face is not None and part.name == "M_EyeLashes":
+                continue
+            if texture is not None and part.uv is not None:
+                rows, uv, local = _texture_vertices(part.triangles, part.uv)
+                material = pyrender.MetallicRoughnessMaterial(baseColorTexture=texture, metallicFactor=0.0, doubleSided=True)
+                primitive = pyrender.Primitive(positions=figure.rest[rows], normals=self._normals[rows], texcoord_0=uv,
+                                               indices=local, material=material)
+                attribute = uv
+            else:
+                rows, local = np.unique(part.triangles, return_inverse=True)
+                colour = figure.colour[rows].copy()
+                if face is not None:
+                    key = np.array([-0.6, 0.7, 1.0]) / np.linalg.norm([-0.6, 0.7, 1.0])
+                    colour[:, :3] *= PHOTO_AMBIENT + (1 - PHOTO_AMBIENT) * np.clip(self._normals[rows] @ key, 0.0, 1.0)[:, None]
+                see_through = bool((colour[:, 3] < 1).any())  # eyelashes fade to their tips
+                material = pyrender.MetallicRoughnessMaterial(baseColorFactor=(1.0, 1.0, 1.0, 1.0), metallicFactor=0.0,
+                                                              roughnessFactor=part.roughness, doubleSided=True,
+                                                              alphaMode="BLEND" if see_through else "OPAQUE")
+                primitive = pyrender.Primitive(positions=figure.rest[rows], normals=self._normals[rows], color_0=colour,
+                                               indices=local.reshape(-1, 3), material=material)
+                attribute = colour
             scene.add(pyrender.Mesh([primitive]), parent_node=self._head)
-            self._parts.append((primitive, rows))
+            self._parts.append((primitive, rows, np.asarray(attribute, dtype=np.float32)))
 
     def _add_eyes_and_mouth(self, scene, rest, faces, pyrender, trimesh) -> None:
         eyes, mouth = _openings(rest, faces)
@@ -378,16 +467,23 @@ class FaceRenderer:
 
     def _draw_figure(self, scene: np.ndarray) -> None:
         _vertex_normals(scene, self._faces, self._normals)
-        for primitive, rows in self._parts:
-            self._upload(primitive, np.hstack([scene[rows], self._normals[rows], self._figure.colour[rows]]).astype(np.float32))
+        for primitive, rows, attribute in self._parts:  # pyrender's interleaved vertex: position, normal, then uv or colour
+            self._upload(primitive, np.hstack([scene[rows], self._normals[rows], attribute]).astype(np.float32))
 
     def _finish(self) -> np.ndarray:
-        colour, _ = self._renderer.render(self._scene, flags=self._flags)
+        colour, depth = self._renderer.render(self._scene, flags=self._flags)
+        if self._backdrop is not None:  # --onto: the alpha drawn where the head is, none elsewhere
+            colour = np.array(colour)
+            colour[:, :, 3] *= depth > 0
         if self._factor == 1:
-            return colour
-        image = np.empty((self.settings.height, self.settings.width, 3), dtype=np.uint8)
-        _downsample(colour, self._factor, image)
-        return image
+            image = colour
+        else:
+            image = np.empty((self.settings.height, self.settings.width, colour.shape[2]), dtype=np.uint8)
+            _downsample(colour, self._factor, image)
+        if self._backdrop is None:
+            return image
+        alpha = image[:, :, 3:] / 255.0  # lays the frame over the photo
+        return np.clip(np.rint(alpha * image[:, :, :3] + (1.0 - alpha) * self._backdrop), 0, 255).astype(np.uint8)
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """(k, 2) pixel coordinates (x right, y down) where points (k, 3) of the head at
@@ -395,7 +491,8 @@ class FaceRenderer:
         camera = self._camera.camera
         pose = self._scene.get_pose(self._camera)
         view = np.linalg.inv(pose)
-        clip = np.c_[points, np.ones(len(points))] @ (camera.get_projection_matrix(self.settings.width, self.settings.height) @ view).T
+        w, h = self._factor * self.settings.width, self._factor * self.settings.height  # the viewport drawn
+        clip = np.c_[points, np.ones(len(points))] @ (camera.get_projection_matrix(w, h) @ view).T
         ndc = clip[:, :2] / clip[:, 3:4]
         return np.column_stack([(ndc[:, 0] + 1) / 2 * self.settings.width, (1 - ndc[:, 1]) / 2 * self.settings.height])
 
@@ -407,7 +504,7 @@ class FaceRenderer:
     @classmethod
     def of(cls, animation, settings: RenderSettings, backend: str = "auto") -> "FaceRenderer":
         """A renderer of the face (or head) an animation was simulated on."""
-        return cls(animation.rest, animation.faces, settings, backend, animation.figure)
+        return cls(animation.rest, animation.faces, settings, backend, animation.figure, animation.face)
 
     def close(self) -> None:
         if getattr(self, "_renderer", None) is not None:
@@ -439,11 +536,11 @@ _shared: dict = {}
 
 
 def shared_renderer(rest: np.ndarray, faces: np.ndarray, settings: RenderSettings, backend: str = "auto",
-                    figure=None) -> FaceRenderer:
-    """One renderer per process for each face (or head figure) and settings, kept for
-    every later call: how batch and dataset workers reuse their context across many specs
-    or samples."""
-    key = (rest.tobytes(), faces.tobytes(), settings, backend, None if figure is None else id(figure))
+                    figure=None, face=None) -> FaceRenderer:
+    """One renderer per process for each face (or head figure, or face directory) and
+    settings, kept for every later call: how batch and dataset workers reuse their
+    context across many specs or samples."""
+    key = (rest.tobytes(), faces.tobytes(), settings, backend, None if figure is None else id(figure), None if face is None else face.path)
     if key not in _shared:
-        _shared[key] = FaceRenderer(rest, faces, settings, backend, figure)
+        _shared[key] = FaceRenderer(rest, faces, settings, backend, figure, face)
     return _shared[key]

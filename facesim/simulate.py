@@ -44,7 +44,8 @@ class Animation:
     activations : (frames, M + controls); pose : (frames, 5) head and gaze angles in
     degrees (facesim.spec.POSE), applied at render time; kinetic_energy, smallest_area :
     (frames,) float; inverted : (frames,) int (triangles turned over and folded against
-    the skin around them, ``kernels._triangle_checks``).
+    the skin around them, ``kernels._triangle_checks``); face : the face directory
+    (facesim.own_face.FaceDirectory) whose head this is, if any: its texture and camera.
     """
 
     name: str
@@ -61,6 +62,7 @@ class Animation:
     seconds: float = 0.0
     model: Model | None = field(default=None, repr=False, compare=False)
     pose: np.ndarray | None = None
+    face: object = None
 
     def pose_at(self, frame: int) -> np.ndarray | None:
         return None if self.pose is None else self.pose[frame]
@@ -108,7 +110,7 @@ def _identity_key(identity):
 
 def model_for(spec: Spec) -> Model:
     """The (cached) model of a spec's mesh, muscles, material and identity."""
-    return _model(spec.mesh_path.resolve(), spec.muscles_path.resolve(), spec.material, _identity_key(spec.identity))
+    return _model(spec.mesh_path.resolve(), spec.muscles_path.resolve(), spec.material, _identity_key(spec.head_identity))
 
 
 #: Figures kept per process (a dataset of many identities keeps only the latest).
@@ -199,6 +201,7 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None) -> Animati
         seconds=seconds,
         model=model,
         pose=pose_table(spec) if spec.pose else None,
+        face=spec.face_directory,
     )
 
 

@@ -17,6 +17,7 @@ time step. A spec is a YAML file validated by pydantic (unknown fields are error
     mesh: my_face.obj           # optional, relative to the spec (default: ICT's head, meshes/ict/head.npz)
     identity: 3                 # the head's identity: a seed, or weights of its 100 modes
     muscles: my_face.muscles.yaml
+    face: me/                   # a face directory (facesim face from-photo): its identity, muscles, texture
 
 ``load_spec`` checks the file alone; ``activation_table`` checks the muscle names against
 the muscle file and turns the spec into a (frames, muscles) table once, before simulation.
@@ -164,6 +165,7 @@ class Spec(Strict):
     muscles: Path | None = None
     identity: int | list[float] | None = Field(None, description=(
         "a head's identity (facesim.head): a seed for weights from the standard normal distribution, or the weights"))
+    face: Path | None = Field(None, description="a face directory written by `facesim face from-photo`")
     _source: Path | None = PrivateAttr(None)
 
     @field_validator("aus")
@@ -194,6 +196,12 @@ class Spec(Strict):
             object.__setattr__(self, "frames", total)
         return self
 
+    @model_validator(mode="after")
+    def _one_head(self):
+        if self.face is not None and (self.identity is not None or self.mesh is not None):
+            raise ValueError("face: a face directory brings its own head; leave out identity and mesh")
+        return self
+
     @property
     def source(self) -> str:
         return str(self._source) if self._source else "<spec>"
@@ -213,15 +221,35 @@ class Spec(Strict):
 
     @property
     def muscles_path(self) -> Path:
-        return self._relative(self.muscles, default_muscles(self.mesh_path))
+        face = self.face_directory
+        return self._relative(self.muscles, face.muscles if face else default_muscles(self.mesh_path))
+
+    @property
+    def face_directory(self):
+        """The spec's face directory read back (facesim.own_face.FaceDirectory), or None."""
+        from .own_face import load_face_directory
+
+        return None if self.face is None else load_face_directory(self._relative(self.face, Path()), f"{self.source}: face")
+
+    @property
+    def head_identity(self):
+        """The head's identity: the face directory's weights, or the spec's own."""
+        face = self.face_directory
+        return face.identity if face else self.identity
 
     def with_overrides(self, **changes) -> "Spec":
-        """A copy with fields replaced (used by the CLI's --mesh, --muscles). A mesh or
-        muscle path given here is relative to the working directory, not to the spec."""
-        for key in ("mesh", "muscles"):
+        """A copy with fields replaced (used by the CLI's --mesh, --muscles, --identity,
+        --face). A path given here is relative to the working directory, not to the spec;
+        a face given here replaces the spec's identity and mesh, an identity or mesh its face."""
+        for key in ("mesh", "muscles", "face"):
             if changes.get(key) is not None:
                 changes[key] = Path(changes[key]).resolve()
-        spec = self.model_copy(update={k: v for k, v in changes.items() if v is not None})
+        update = {k: v for k, v in changes.items() if v is not None}
+        if "face" in update:
+            update.update(identity=None, mesh=None)
+        elif "identity" in update or "mesh" in update:
+            update["face"] = None
+        spec = self.model_copy(update=update)
         spec._source = self._source
         return spec
 
