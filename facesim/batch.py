@@ -40,18 +40,19 @@ class BatchResult:
 
 
 def render_one(spec_path: Path, output: Path, settings: RenderSettings, backend: str, force: bool,
-               mesh: Path | None = None, muscles: Path | None = None, identity: int | None = None) -> BatchResult:
+               mesh: Path | None = None, muscles: Path | None = None, identity: int | None = None,
+               face: Path | None = None) -> BatchResult:
     """Load, simulate, render and write one spec; errors become a result, not an exception."""
     from .output import check_output, output_kind, write_animation
     from .simulate import simulate
     from .spec import load_spec
 
     try:
-        spec = load_spec(spec_path).with_overrides(mesh=mesh, muscles=muscles, identity=identity)
+        spec = load_spec(spec_path).with_overrides(mesh=mesh, muscles=muscles, identity=identity, face=face)
         check_output(output, force, settings)
         animation = simulate(spec)
         renderer = None if output_kind(output) == "npz" else shared_renderer(animation.rest, animation.faces, settings, backend,
-                                                                                    animation.figure)
+                                                                                    animation.figure, animation.face)
         return BatchResult(spec_path, report=write_animation(animation, output, settings, backend=backend, renderer=renderer,
                                                              replace=force))
     except FacesimError as exc:
@@ -62,12 +63,13 @@ def render_one(spec_path: Path, output: Path, settings: RenderSettings, backend:
 
 
 def run_batch(specs: list[Path], outdir: Path, suffix: str, settings: RenderSettings, backend: str, jobs: int,
-              force: bool, mesh: Path | None = None, muscles: Path | None = None, identity: int | None = None, on_done=None,
+              force: bool, mesh: Path | None = None, muscles: Path | None = None, identity: int | None = None,
+              face: Path | None = None, on_done=None,
               executor: str = "local", scheduler: str | None = None) -> list[BatchResult]:
     outputs = [outdir / (s.stem + suffix) for s in specs]
     if len(set(outputs)) != len(outputs):
         raise InputError("two specs share a file name; their outputs would collide in " + str(outdir))
-    args = [(s, o, settings, backend, force, mesh, muscles, identity) for s, o in zip(specs, outputs)]
+    args = [(s, o, settings, backend, force, mesh, muscles, identity, face) for s, o in zip(specs, outputs)]
     results: dict[Path, BatchResult] = {}
 
     def done(result: BatchResult) -> None:

@@ -54,16 +54,11 @@ def handled(command):
 
 
 def settings_from(size: str, camera: str, wireframe: bool = False, show_muscles: bool = False, antialias: bool = True,
-                  framing: str = "face", look: str = "clay", onto: Path | None = None):
+                  framing: str = "face", look: str = "auto", onto: Path | None = None):
     from .render import RenderSettings, parse_size
 
     width, height = parse_size(size)
     return RenderSettings(width, height, camera, wireframe, show_muscles, antialias, framing, look, onto)
-
-
-def look_for(look: Optional[str], spec) -> str:
-    """--look, or by default the photo look for a head with a face directory, clay otherwise."""
-    return look or ("photo" if spec.face is not None else "clay")
 
 
 def positive(value: Optional[int], name: str) -> None:
@@ -85,8 +80,8 @@ MUSCLES = typer.Option(None, "--muscles", help="muscle file to use instead of th
 IDENTITY = typer.Option(None, "--identity", help="the head's identity instead of the spec's: a seed for the "
                         "weights of ICT's 100 identity modes (standard normal)")
 FACE = typer.Option(None, "--face", help="a face directory (facesim face from-photo): your head, its muscles and texture")
-LOOK = typer.Option(None, "--look", help="photo (a face directory's baked photo, unlit) or clay (facesim's materials, "
-                    "lit); default: photo with a face directory")
+LOOK = typer.Option("auto", "--look", help="photo (a face directory's baked photo, unlit), clay (facesim's materials, "
+                    "lit), or auto: photo for a head with a face directory")
 
 
 def identity_seed(identity: Optional[int]) -> Optional[int]:
@@ -114,7 +109,7 @@ def render(
     muscles: Optional[Path] = MUSCLES,
     identity: Optional[int] = IDENTITY,
     face: Optional[Path] = FACE,
-    look: Optional[str] = LOOK,
+    look: str = LOOK,
     onto: Optional[Path] = typer.Option(None, "--onto", help="render through the face's fitted camera into this photo "
                                         "(the one it was fitted to), at its size: the photo comes alive"),
     blend: Optional[str] = typer.Option(None, "--blend", help="blend expressions, e.g. happy=0.6,surprise=0.4"),
@@ -143,7 +138,9 @@ def render(
         height, width = read_image(onto).shape[:2]
         onto_photo(loaded.face_directory, onto)
         size = f"{width}x{height}"
-    settings = settings_from(size, camera, wireframe, show_muscles, antialias, framing, look_for(look, loaded), onto)
+    settings = settings_from(size, camera, wireframe, show_muscles, antialias, framing, look, onto)
+    if look == "photo" and loaded.face_directory is None:
+        raise InputError("--look photo: needs a face directory (--face DIR, or face: in the spec)")
     output = output or Path("out") / f"{loaded.title}.mp4"
     check_output(output, force, settings)
     animation = simulate(loaded, notice=notice)
@@ -170,6 +167,8 @@ def batch(
     mesh: Optional[Path] = MESH,
     muscles: Optional[Path] = MUSCLES,
     identity: Optional[int] = IDENTITY,
+    face: Optional[Path] = FACE,
+    look: str = LOOK,
     executor: str = typer.Option("local", "--executor", help="local (processes) or dask"),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="tcp://HOST:PORT of a Dask scheduler"),
 ):
@@ -188,12 +187,16 @@ def batch(
     suffix = {"mp4": ".mp4", "gif": ".gif", "npz": ".npz", "png": ""}.get(fmt)
     if suffix is None:
         raise InputError(f"--format: expected mp4, gif, npz or png, got {fmt!r}")
-    settings = settings_from(size, camera, antialias=antialias, framing=framing)
+    settings = settings_from(size, camera, antialias=antialias, framing=framing, look=look)
+    if face is not None:
+        from .own_face import load_face_directory
+
+        face = load_face_directory(face).path  # checked once, before any spec
     specs = collect_specs(inputs)
     if outdir.exists() and not outdir.is_dir():
         raise InputError(f"{outdir}: is not a directory")
     with progress_bar(len(specs), "batch") as advance:
-        results = run_batch(specs, outdir, suffix, settings, backend, jobs, force, mesh, muscles, identity_seed(identity),
+        results = run_batch(specs, outdir, suffix, settings, backend, jobs, force, mesh, muscles, identity_seed(identity), face,
                             on_done=(lambda _: advance()) if advance else None, executor=executor, scheduler=scheduler)
     table = Table(title=f"facesim batch: {len(specs)} specs")
     for column in ("spec", "muscles", "frames", "simulation (ms)", "render (s)", "fps", "output"):
@@ -314,6 +317,8 @@ def sheet(
     mesh: Optional[Path] = MESH,
     muscles: Optional[Path] = MUSCLES,
     identity: Optional[int] = IDENTITY,
+    face: Optional[Path] = FACE,
+    look: str = LOOK,
 ):
     """Every expression at its apex in a labelled grid, the neutral face first: the last
     frame of an expression that eases in and holds, the strongest of a sequence. An
@@ -330,7 +335,7 @@ def sheet(
         raise InputError(f"{output}: the sheet is a .png")
     check_destination(output, force)
     order = {name: k for k, name in enumerate(THESIS_ORDER)}
-    overrides = dict(mesh=mesh, muscles=muscles, identity=identity_seed(identity))
+    overrides = dict(mesh=mesh, muscles=muscles, identity=identity_seed(identity), face=face)
     specs = sorted((load_spec(p).with_overrides(**overrides) for p in collect_specs(inputs)),
                    key=lambda s: (order.get(s.title, len(order)), s.title))
     results, failures = [], []
@@ -344,7 +349,7 @@ def sheet(
     if not done:
         raise SimulationError(failures[0])
     first = done[0]
-    settings = settings_from(size, "front", framing=framing)
+    settings = settings_from(size, "front", framing=framing, look=look)
     blank = np.full((settings.height, settings.width, 3), np.array(BACKGROUND[:3]) * 255, dtype=np.uint8)
     images, labels = [], ["neutral"]
     with FaceRenderer.of(first, settings, backend) as renderer:
@@ -354,7 +359,8 @@ def sheet(
             if a is None:
                 images.append(blank)
                 continue
-            same_face = a.rest.shape == first.rest.shape and (a.rest == first.rest).all() and a.figure is first.figure
+            same_face = (a.rest.shape == first.rest.shape and (a.rest == first.rest).all() and a.figure is first.figure
+                         and a.face is first.face)
             if same_face:
                 images.append(renderer.frame(a, apex_frame(a)))
             else:
@@ -381,6 +387,9 @@ def dataset(
     jitter: bool = typer.Option(False, "--jitter", help="vary the camera and the lights per sample"),
     clip: bool = typer.Option(False, "--clip", help="also write each sample's 20 frames as an MP4 clip"),
     backend: str = BACKEND,
+    face: Optional[Path] = typer.Option(None, "--face", help="a face directory (facesim face from-photo): every sample "
+                                        "is that person, instead of ICT's generic head (or, with --jitter, a new person each)"),
+    look: str = LOOK,
     sheet_png: Optional[Path] = typer.Option(None, "--sheet", help="also draw the first 12 samples to this PNG"),
 ):
     """Render N labelled expressions (PNG + labels + manifest) for training recognisers."""
@@ -389,7 +398,11 @@ def dataset(
     from .render import parse_size
 
     width, height = parse_size(size)
-    settings = DatasetSettings(seed, width, height, jitter, backend, clip)
+    if face is not None:
+        from .own_face import load_face_directory
+
+        face = load_face_directory(face).path
+    settings = DatasetSettings(seed, width, height, jitter, backend, clip, None if face is None else str(face), look)
     with progress_bar(max(n, 0), "dataset") as advance:
         manifest = build_dataset(output, n, settings, executor, jobs, scheduler, advance, warn=notice)
     typer.echo(f"wrote {manifest} ({n} samples)", err=True)

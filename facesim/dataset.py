@@ -72,6 +72,8 @@ class DatasetSettings:
     jitter: bool = False
     backend: str = "auto"
     clip: bool = False
+    face: str | None = None  # a face directory: every sample that person
+    look: str = "auto"
 
 
 def sample(seed: int, index: int, available_aus: list[str]) -> dict:
@@ -126,13 +128,15 @@ def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
         return sid
     probe = Spec(frames=FRAMES, onset=ONSET)
     draw = sample(settings.seed, index, available_action_units(model_for(probe).muscles.names))
-    identity = draw["identity"] if settings.jitter else None
+    identity = draw["identity"] if settings.jitter and settings.face is None else None
     what = {"expressions": {draw["expression"]: draw["intensity"]}} if draw["expression"] else {"aus": draw["aus"]}
-    spec = Spec(frames=FRAMES, onset=ONSET, identity=identity, **what)
+    spec = Spec(frames=FRAMES, onset=ONSET, identity=identity, face=settings.face, **what)
     label = {"id": sid, "index": index, "seed": settings.seed, "expression": draw["expression"],
              "intensity": draw["intensity"], "aus": draw["aus"], "width": settings.width, "height": settings.height,
              "frames": FRAMES, "dt": spec.dt, "identity": identity,
              "identity_weights": [] if identity is None else [round(float(w), 6) for w in identity_weights(identity)]}
+    if settings.face is not None:
+        label.update(face=settings.face, identity_weights=[round(w, 6) for w in spec.head_identity])
     try:
         animation = simulate(spec)
     except SimulationError as exc:  # recorded, not fatal: the same draw fails the same way anywhere
@@ -151,8 +155,8 @@ def _render_sample(root: Path, sid: str, animation, draw: dict, settings: Datase
 
     from .render import RenderSettings, shared_renderer
 
-    renderer = shared_renderer(animation.rest, animation.faces, RenderSettings(settings.width, settings.height),
-                               settings.backend, animation.figure)
+    renderer = shared_renderer(animation.rest, animation.faces, RenderSettings(settings.width, settings.height, look=settings.look),
+                               settings.backend, animation.figure, animation.face)
     yaw, pitch, light = (draw[k] if settings.jitter else v for k, v in (("yaw", 0.0), ("pitch", 0.0), ("light", 1.0)))
     renderer.view(yaw, pitch, light)
     pose = {name: float(draw[name]) if settings.jitter else 0.0 for name in POSE_JITTER}
@@ -189,7 +193,9 @@ def _prepare(directory: Path, n: int, settings: DatasetSettings):
     for stale in directory.glob("*/.*.partial-*"):
         stale.unlink()  # left by a worker that was killed mid-write
     meta = directory / "dataset.json"
-    wanted = {k: v for k, v in asdict(settings).items() if k != "backend"}
+    defaults = asdict(DatasetSettings(settings.seed))
+    wanted = {k: v for k, v in asdict(settings).items()  # a setting added later is recorded when it is used
+              if k != "backend" and not (k in ("face", "look") and v == defaults[k])}
     if meta.exists():
         previous = json.loads(meta.read_text())
         if previous != wanted:
@@ -324,7 +330,9 @@ def check_settings(settings: DatasetSettings) -> None:
 
     if settings.seed < 0:
         raise InputError(f"--seed: expected a non-negative integer, got {settings.seed}")
-    RenderSettings(settings.width, settings.height)  # --size
+    RenderSettings(settings.width, settings.height, look=settings.look)  # --size, --look
+    if settings.look == "photo" and settings.face is None:
+        raise InputError("--look photo: needs a face directory (--face DIR)")
     if settings.backend not in ("auto",) + BACKENDS:
         raise InputError(f"--backend: expected auto, {' or '.join(BACKENDS)}, got {settings.backend!r}")
 

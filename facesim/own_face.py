@@ -66,13 +66,16 @@ def load_face_directory(path: str | Path, where: str = "--face") -> FaceDirector
     there, face.yaml's identity (100 finite weights) and camera, the texture a readable
     image of the atlas's size. One-line InputError naming the file otherwise."""
     path = Path(path).resolve()
+    if not path.is_dir():
+        raise InputError(f"{where}: {path}: not a face directory (make one with `facesim face from-photo PHOTO -o DIR`)")
     stamp = tuple((path / name).stat().st_mtime_ns if (path / name).is_file() else 0 for name in sorted(FACE_FILES))
-    return _load_face_directory(path, where, stamp)
+    return _load_face_directory(path, stamp)
 
 
 @lru_cache(maxsize=8)
-def _load_face_directory(path: Path, where: str, stamp: tuple) -> FaceDirectory:
-    """load_face_directory's work, once per directory as its files stand (``stamp``)."""
+def _load_face_directory(path: Path, stamp: tuple) -> FaceDirectory:
+    """load_face_directory's work, once per directory as its files stand (``stamp``):
+    every spec naming it gets the same FaceDirectory, so they share a renderer."""
     import yaml
     from PIL import Image
 
@@ -80,8 +83,6 @@ def _load_face_directory(path: Path, where: str, stamp: tuple) -> FaceDirectory:
     from .fit import Camera
     from .head import IDENTITY_MODES
 
-    if not path.is_dir():
-        raise InputError(f"{where}: {path}: not a face directory (make one with `facesim face from-photo PHOTO -o DIR`)")
     missing = sorted(name for name in FACE_FILES if not (path / name).is_file())
     if missing:
         raise InputError(f"{path}: not a face directory: {', '.join(missing)} missing")

@@ -18,7 +18,7 @@ from __future__ import annotations
 import ctypes.util
 import os
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -41,11 +41,12 @@ CAMERAS = {"front": 0.0, "three-quarter": 35.0, "profile": 90.0}
 FRAMINGS = ("face", "head")
 #: How a head looks: facesim's materials under a key and a fill light (clay), or a face
 #: directory's baked photo (photo), drawn unlit: the photo's own light is in its colours.
-LOOKS = ("clay", "photo")
+LOOKS = ("auto", "clay", "photo")  # auto: photo for a head with a face directory, clay otherwise
 #: In the photo look the parts a photo does not texture (teeth, gums and tongue) keep their
-#: colours, shaded once at rest by the key light's direction: this much ambient, the rest
-#: by the cosine to the light.
-PHOTO_AMBIENT = 0.45
+#: colours, shaded once at rest by the key light's direction (this much ambient, the rest
+#: by the cosine to the light) and darkening with depth behind the front teeth, to the
+#: second value at the third (cm): an open mouth is dark inside.
+PHOTO_AMBIENT, MOUTH_DARKEST, MOUTH_DEEP = 0.45, 0.2, 3.5
 
 SKIN = (0.86, 0.66, 0.55, 1.0)
 BACKGROUND = (0.93, 0.93, 0.95, 1.0)
@@ -76,7 +77,7 @@ class RenderSettings:
     show_muscles: bool = False
     antialias: bool = True
     framing: str = "face"
-    look: str = "clay"
+    look: str = "auto"
     onto: Path | None = None  # a photo to render into, through its face directory's fitted camera
 
     def __post_init__(self):
@@ -249,6 +250,8 @@ class FaceRenderer:
         behind its openings) or, with ``figure`` (facesim.figure), a whole head driven
         by its simulation mesh ``rest``; ``face`` (facesim.own_face.FaceDirectory), the
         face directory of that head, for the photo look and --onto."""
+        if settings.look == "auto":
+            settings = replace(settings, look="photo" if face is not None and figure is not None else "clay")
         if (settings.look == "photo" or settings.onto is not None) and (figure is None or face is None):
             what = "--onto" if settings.onto is not None else "--look photo"
             raise InputError(f"{what}: needs a face directory (--face DIR, or face: in the spec; "
@@ -363,6 +366,12 @@ class FaceRenderer:
             linear = pyrender.Sampler(magFilter=pyrender.constants.GLTF.LINEAR, minFilter=pyrender.constants.GLTF.LINEAR)
             texture = pyrender.Texture(source=image, source_channels="RGBA" if image.shape[2] == 4 else "RGB", sampler=linear)
         self._parts = []
+        if face is not None:
+            key = np.array([-0.6, 0.7, 1.0]) / np.linalg.norm([-0.6, 0.7, 1.0])
+            lit = PHOTO_AMBIENT + (1 - PHOTO_AMBIENT) * np.clip(self._normals @ key, 0.0, 1.0)
+            teeth = np.concatenate([p.triangles.ravel() for p in figure.parts if p.name == "M_Teeth"])
+            deep = figure.rest[teeth, 2].max() - figure.rest[:, 2]
+            shade = lit * np.clip(1.0 - (1.0 - MOUTH_DARKEST) * deep / MOUTH_DEEP, MOUTH_DARKEST, 1.0)
         for part in figure.parts:
             if face is not None and part.name == "M_EyeLashes":
                 continue
@@ -376,8 +385,7 @@ class FaceRenderer:
                 rows, local = np.unique(part.triangles, return_inverse=True)
                 colour = figure.colour[rows].copy()
                 if face is not None:
-                    key = np.array([-0.6, 0.7, 1.0]) / np.linalg.norm([-0.6, 0.7, 1.0])
-                    colour[:, :3] *= PHOTO_AMBIENT + (1 - PHOTO_AMBIENT) * np.clip(self._normals[rows] @ key, 0.0, 1.0)[:, None]
+                    colour[:, :3] *= shade[rows, None]
                 see_through = bool((colour[:, 3] < 1).any())  # eyelashes fade to their tips
                 material = pyrender.MetallicRoughnessMaterial(baseColorFactor=(1.0, 1.0, 1.0, 1.0), metallicFactor=0.0,
                                                               roughnessFactor=part.roughness, doubleSided=True,
