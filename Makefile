@@ -60,6 +60,8 @@ docs: setup $(VENV)/.photo
 	-$(BIN)/facesim sheet $(THESIS_SPECS) --mesh out/astronaut.obj -o docs/astronaut.png --size 320x320 --force
 	rm -rf out/dataset-docs
 	$(BIN)/facesim dataset --n 12 --seed 3 --jitter --size 192x192 -o out/dataset-docs --sheet docs/dataset.png
+	# your own face: docs/own_face.png and docs/animated_photo.gif (face from-photo, --look photo, --onto)
+	$(BIN)/python scripts/own_face_docs.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

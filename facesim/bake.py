@@ -32,6 +32,8 @@ Steps (:func:`bake`):
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -156,6 +158,18 @@ def _bake(texel_uv, corners, tile, group, pixels, depth, facing, vertex_colour, 
         uc, vc = texel_uv[t, 2, 0], texel_uv[t, 2, 1]
         x0, x1 = _span(ua, ub, uc, cols)
         y0, y1 = _span(va, vb, vc, rows)
+        # the depth test allows what the triangle's own depth changes over a pixel of the
+        # photo: on a surface seen at a slant a texel and its pixel's centre lie that far
+        # apart in depth (without it, lines of unseen texels ran along the triangles' edges)
+        ex, ey = pixels[b, 0] - pixels[a, 0], pixels[b, 1] - pixels[a, 1]
+        fx, fy = pixels[c, 0] - pixels[a, 0], pixels[c, 1] - pixels[a, 1]
+        area = ex * fy - ey * fx
+        slope = 0.0
+        if abs(area) > 1e-12:
+            dx = ((depth[b] - depth[a]) * fy - (depth[c] - depth[a]) * ey) / area
+            dy = ((depth[c] - depth[a]) * ex - (depth[b] - depth[a]) * fx) / area
+            slope = math.sqrt(dx * dx + dy * dy)
+        allowed = tolerance + slope
         for y in range(y0, y1 + 1):
             for x in range(x0, x1 + 1):
                 l0, l1, l2 = _barycentric(x + 0.5, y + 0.5, ua, va, ub, vb, uc, vc)
@@ -170,7 +184,7 @@ def _bake(texel_uv, corners, tile, group, pixels, depth, facing, vertex_colour, 
                 if ix < 0 or iy < 0 or ix >= w or iy >= h:
                     continue
                 d = l0 * depth[a] + l1 * depth[b] + l2 * depth[c]
-                if owner[iy, ix] != group[t] or d < zbuffer[iy, ix] - tolerance:
+                if owner[iy, ix] != group[t] or d < zbuffer[iy, ix] - allowed:
                     continue
                 visible[y, x] = True
                 cosine = l0 * facing[a] + l1 * facing[b] + l2 * facing[c]
