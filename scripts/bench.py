@@ -416,14 +416,14 @@ buffers = []
 for k in range(a.frames):
     x = figure.positions(a.positions[k], a.jaw_at(k))
     _vertex_normals(x, r._faces, r._normals)
-    buffers.append([np.hstack([x[rows], r._normals[rows], figure.colour[rows]]).astype(np.float32) for _, rows in r._parts])
+    buffers.append([np.hstack([x[rows], r._normals[rows], attribute]).astype(np.float32) for _, rows, attribute in r._parts])
 for k in range(3): r.frame(a, k)
 ours, floor, encode = [], [], []
 for _ in range(repeats):
     t = time.perf_counter(); frames = np.stack([r.frame(a, k) for k in range(a.frames)]); ours.append((time.perf_counter() - t) / a.frames)
     t = time.perf_counter()
     for data in buffers:
-        for (primitive, _), d in zip(r._parts, data):
+        for (primitive, _, _), d in zip(r._parts, data):
             r._upload(primitive, d)
         r._renderer.render(r._scene, flags=r._flags)
     floor.append((time.perf_counter() - t) / a.frames)
