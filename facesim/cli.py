@@ -129,18 +129,15 @@ def render(
     if spec and blend:
         loaded = loaded.with_overrides(include=loaded.include + blend_spec(blend).include)
     loaded = loaded.with_overrides(mesh=mesh, muscles=muscles, identity=identity_seed(identity), face=face)
-    if onto is not None:  # the frames take the photo's size, and the photo is checked against the face before any work
-        from .own_face import onto_photo
-        from .photo import read_image
-
-        if loaded.face_directory is None:
-            raise InputError("--onto: needs a face directory (--face DIR, or face: in the spec)")
-        height, width = read_image(onto).shape[:2]
-        onto_photo(loaded.face_directory, onto)
-        size = f"{width}x{height}"
     settings = settings_from(size, camera, wireframe, show_muscles, antialias, framing, look, onto)
-    if look == "photo" and loaded.face_directory is None:
-        raise InputError("--look photo: needs a face directory (--face DIR, or face: in the spec)")
+    settings.for_face(loaded.face_directory)  # before any work: the photo look and --onto need a face
+    if onto is not None:  # the frames take the photo's size, and the photo is checked against the face
+        from dataclasses import replace
+
+        from .own_face import onto_photo
+
+        height, width = onto_photo(loaded.face_directory, onto)[0].shape[:2]
+        settings = replace(settings, width=width, height=height)
     output = output or Path("out") / f"{loaded.title}.mp4"
     check_output(output, force, settings)
     animation = simulate(loaded, notice=notice)

@@ -330,9 +330,7 @@ def check_settings(settings: DatasetSettings) -> None:
 
     if settings.seed < 0:
         raise InputError(f"--seed: expected a non-negative integer, got {settings.seed}")
-    RenderSettings(settings.width, settings.height, look=settings.look)  # --size, --look
-    if settings.look == "photo" and settings.face is None:
-        raise InputError("--look photo: needs a face directory (--face DIR)")
+    RenderSettings(settings.width, settings.height, look=settings.look).for_face(settings.face)  # --size, --look
     if settings.backend not in ("auto",) + BACKENDS:
         raise InputError(f"--backend: expected auto, {' or '.join(BACKENDS)}, got {settings.backend!r}")
 

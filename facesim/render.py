@@ -59,6 +59,8 @@ WIRE = (0.12, 0.14, 0.22, 1.0)
 #: A head's wireframe is drawn this far (cm) in front of the skin, toward the camera.
 WIRE_LIFT = 0.15
 KEY_LIGHT, FILL_LIGHT = 3.2, 1.3
+#: Where the key light comes from (up and to the subject's right, in front), and the fill.
+KEY_DIRECTION, FILL_DIRECTION = np.array([-0.6, 0.7, 1.0]), np.array([0.9, -0.1, 0.6])
 #: Antialiasing renders each frame this many times wider and taller and averages the
 #: blocks (``_downsample``): 4 samples per pixel, faster than pyrender's multisampling in
 #: software (``_single_sample``). Frames larger than ``SUPERSAMPLE_LIMIT``, and frames
@@ -89,6 +91,15 @@ class RenderSettings:
             raise InputError(f"--framing: expected one of {', '.join(FRAMINGS)}, got {self.framing!r}")
         if self.look not in LOOKS:
             raise InputError(f"--look: expected one of {', '.join(LOOKS)}, got {self.look!r}")
+
+    def for_face(self, face) -> "RenderSettings":
+        """These settings for a head with the face directory ``face`` (or None): the auto
+        look made photo or clay; InputError when the photo look or --onto has no face."""
+        if face is None and (self.look == "photo" or self.onto is not None):
+            what = "--onto" if self.onto is not None else "--look photo"
+            raise InputError(f"{what}: needs a face directory (--face DIR, or face: in the spec; "
+                             "make one with `facesim face from-photo`)")
+        return replace(self, look="clay" if face is None else "photo") if self.look == "auto" else self
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -250,12 +261,7 @@ class FaceRenderer:
         behind its openings) or, with ``figure`` (facesim.figure), a whole head driven
         by its simulation mesh ``rest``; ``face`` (facesim.own_face.FaceDirectory), the
         face directory of that head, for the photo look and --onto."""
-        if settings.look == "auto":
-            settings = replace(settings, look="photo" if face is not None and figure is not None else "clay")
-        if (settings.look == "photo" or settings.onto is not None) and (figure is None or face is None):
-            what = "--onto" if settings.onto is not None else "--look photo"
-            raise InputError(f"{what}: needs a face directory (--face DIR, or face: in the spec; "
-                             "make one with `facesim face from-photo`)")
+        settings = settings.for_face(None if figure is None else face)
         self.backend = use_backend(backend)
         import pyrender
         import trimesh
@@ -312,9 +318,9 @@ class FaceRenderer:
             self._camera = scene.add(view, pose=pose)
         self._lights = [
             scene.add(pyrender.DirectionalLight(color=(1.0, 0.97, 0.92), intensity=KEY_LIGHT),
-                      pose=_look_at(centre + np.array([-0.6, 0.7, 1.0]), centre)),
+                      pose=_look_at(centre + KEY_DIRECTION, centre)),
             scene.add(pyrender.DirectionalLight(color=(0.85, 0.9, 1.0), intensity=FILL_LIGHT),
-                      pose=_look_at(centre + np.array([0.9, -0.1, 0.6]), centre)),
+                      pose=_look_at(centre + FILL_DIRECTION, centre)),
         ]
         self._scene = scene
         try:
@@ -367,7 +373,7 @@ class FaceRenderer:
             texture = pyrender.Texture(source=image, source_channels="RGBA" if image.shape[2] == 4 else "RGB", sampler=linear)
         self._parts = []
         if face is not None:
-            key = np.array([-0.6, 0.7, 1.0]) / np.linalg.norm([-0.6, 0.7, 1.0])
+            key = KEY_DIRECTION / np.linalg.norm(KEY_DIRECTION)
             lit = PHOTO_AMBIENT + (1 - PHOTO_AMBIENT) * np.clip(self._normals @ key, 0.0, 1.0)
             teeth = np.concatenate([p.triangles.ravel() for p in figure.parts if p.name == "M_Teeth"])
             deep = figure.rest[teeth, 2].max() - figure.rest[:, 2]

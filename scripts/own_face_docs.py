@@ -59,11 +59,8 @@ def enlarged(image: np.ndarray, factor: int = 2) -> np.ndarray:
     return np.asarray(Image.fromarray(image).resize((factor * image.shape[1], factor * image.shape[0]), Image.LANCZOS))
 
 
-def apex(animation) -> int:
-    return int(np.argmax(np.abs(animation.positions - animation.rest).sum(axis=(1, 2))))
-
-
 def main() -> None:
+    from facesim.cli import apex_frame
     from facesim.own_face import face_from_photo, load_face_directory
     from facesim.photo import read_image
     from facesim.plots import contact_sheet
@@ -92,7 +89,7 @@ def main() -> None:
             row.append(renderer.render(neutral.rest))
             for expression in ("happy", "surprise"):
                 animation = simulate(load_spec(expression).with_overrides(face=face.path))
-                row.append(renderer.frame(animation, apex(animation)))
+                row.append(renderer.frame(animation, apex_frame(animation)))
         images += row
         labels += [f"{name}: photo", "fitted head (clay) over it", "textured, neutral", "happy", "surprise"]
     contact_sheet(images, labels, ROOT / "docs" / "own_face.png", columns=5, replace=True)
