@@ -201,7 +201,7 @@ def face_from_photo(photo: str | Path, output: str | Path, replace: bool = False
         raise InputError("face from-photo needs MediaPipe: pip install -e '.[photo]' (or make mesh)") from None
     photo, output = Path(photo), Path(output)
     image = read_image(photo)
-    landmarks = detect_landmarks(image, str(photo), notice)
+    landmarks = detect_landmarks(image, str(photo), notice, refine=True)
     fit = fit_head(load_head(HEAD), HEAD, landmarks, image.shape[1], image.shape[0], str(photo))
     identity = tuple(float(w) for w in fit.identity)
     model = _model(HEAD.resolve(), HEAD_MUSCLES.resolve(), Material(), identity)
