@@ -185,6 +185,29 @@ def _lit_shader(renderer) -> None:
     renderer._program_cache = Programs()
 
 
+def _colour_only(renderer) -> None:
+    """Make a pyrender Renderer read back only a frame's colour. pyrender also reads every
+    pixel's depth and turns it into a distance (a blit, a read and several passes over the
+    frame's floats), which facesim needs only to lay a frame over a photo (``--onto``);
+    the depth it then returns is None. EGL reads pyrender's framebuffer
+    (``_read_main_framebuffer``), OSMesa the context's own buffer (``read_depth_buf``)."""
+    import pyrender
+    from OpenGL import GL
+
+    def read_main_framebuffer(scene, flags):
+        width, height = renderer._main_fb_dims
+        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._main_fb_ms)
+        GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, renderer._main_fb)
+        GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height, GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR)
+        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._main_fb)
+        channels, layout = (4, GL.GL_RGBA) if flags & pyrender.RenderFlags.RGBA else (3, GL.GL_RGB)
+        data = GL.glReadPixels(0, 0, width, height, layout, GL.GL_UNSIGNED_BYTE)
+        return np.frombuffer(data, dtype=np.uint8).reshape(height, width, channels)[::-1], None
+
+    renderer._read_main_framebuffer = read_main_framebuffer
+    renderer.read_depth_buf = lambda: None
+
+
 @njit(**NUMBA_OPTIONS)
 def _downsample(image, factor, out):
     """The mean of each ``factor`` x ``factor`` block of ``image`` (H, W, C) uint8 into
@@ -354,6 +377,8 @@ class FaceRenderer:
         if supersample or not settings.antialias:
             _single_sample(self._renderer._renderer)
         _lit_shader(self._renderer._renderer)
+        if settings.onto is None:
+            _colour_only(self._renderer._renderer)
         wireframe = settings.wireframe and figure is None
         self._flags = pyrender.RenderFlags.ALL_WIREFRAME if wireframe else pyrender.RenderFlags.NONE
         if settings.look == "photo":
