@@ -13,13 +13,15 @@ at least ``MOVES``:
   ``TOP`` vertices ICT moves most (the peak).
 
 On the default head the simulated vertices are MediaPipe's landmarks, vertex k lying on
-ICT's vertex ``Head.landmarks[k]``, so ICT's displacement at those vertices is all the
-comparison needs (a few kB per unit, ``tests/data/ict_action_units.npz``). Both fields
-are compared where the head shows them, carried over its face area by the same follow
-(``on_face``, facesim.figure): ICT's displacement carried that way keeps cosine at least
-0.95 with its full shape for every unit here, and the face area weighs each region by
-how much of the face it is (the lips and lids have many vertices there, few landmarks).
-``scripts/realism.py`` compares against ICT's full shapes.
+ICT's vertex ``Head.landmarks[k]``. facesim's field is compared where the head shows it,
+carried over its face area by the head's follow (``on_face``, facesim.figure), against
+ICT's full shape there, as ``scripts/realism.py`` does; the tests read ICT's shape from
+``tests/data/ict_action_units.npz`` (about 35 kB per unit over the face area, and its
+value at the landmark vertices, which ``scripts/calibrate.py`` fits to). ICT's
+displacement at the landmarks alone, carried over the face by the same follow, keeps
+cosine at least 0.95 with its full shape for every unit: the simulated mesh can carry
+every unit, and the face area weighs each region by how much of the face it is (the lips
+and lids have many vertices there, few landmarks).
 """
 
 from __future__ import annotations

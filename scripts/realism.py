@@ -114,17 +114,20 @@ def draw_atlas(panels: list[tuple[str, str, np.ndarray | None, np.ndarray]], pat
 
 
 def write_calibration_data(shapes, path: Path) -> None:
-    """ICT's displacement for each unit at the default head's landmark vertices, float16
-    (as ICT ships its deltas): what the per-unit tests compare the simulation with."""
+    """ICT's displacement for each unit, float16 (as ICT ships its deltas): at the default
+    head's landmark vertices (what scripts/calibrate.py fits the simulated vertices to)
+    and over the whole face area (what the per-unit tests compare with, as this table
+    does)."""
     from facesim.config import HEAD
     from facesim.head import load_head
 
     head = load_head(HEAD)
     units = list(ICT_SHAPES)
-    displacement = np.stack([ict_displacement(shapes, au)[head.landmarks] for au in units]).astype(np.float16)
+    fields = np.stack([ict_displacement(shapes, au)[:FACE_AREA] for au in units])
     path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(path, action_units=np.array(units), landmark_vertex=head.landmarks, displacement=displacement)
-    print(f"wrote {path}: {displacement.shape[0]} action units at {displacement.shape[1]} landmark vertices")
+    np.savez_compressed(path, action_units=np.array(units), landmark_vertex=head.landmarks,
+                        displacement=fields[:, head.landmarks].astype(np.float16), face_area=fields.astype(np.float16))
+    print(f"wrote {path}: {len(units)} action units at {len(head.landmarks)} landmark vertices and {FACE_AREA} face vertices")
 
 
 def main() -> int:
