@@ -38,7 +38,7 @@ from .config import LENGTH_EPS, NEGLIGIBLE_DELTA, NUMBA_OPTIONS
 #: Shapes: n vertices, t triangles, s springs, r repulsion pairs, M muscles; the jaw and
 #: eyelid fields are facesim.rig.Rig's, the material's are facesim.model.Material's.
 ModelArrays = namedtuple("ModelArrays", [
-    "rest_position", "faces", "rest_normal", "rest_area", "rest_against", "pinned",
+    "rest_position", "faces", "rest_normal", "rest_area", "rest_against", "pinned", "tie",
     "neighbour_start", "neighbour_index", "ring_start", "ring_a", "ring_b",
     "spring_indices", "spring_rest_length", "repulsion_vertex", "repulsion_edge", "repulsion_rest_distance",
     "hinge", "hinge_weight",
@@ -226,13 +226,13 @@ def _spring_forces(model, xp, forces):
 @njit(**NUMBA_OPTIONS)
 def _tissue_forces(model, xp, control, forces):
     """Hypodermis springs: each vertex tied to its target (its rest position, moved by the
-    jaw and eyelids) with stiffness k_t + hold_i, the soft tissue that attaches skin to
-    bone. Not in the thesis (tissue = 0 is its model); a spring mesh has no bending
+    jaw and eyelids) with stiffness k_t + tie_i + hold_i, the soft tissue that attaches
+    skin to bone (tie_i: a tied rim's, the skin beyond the cut, muscles.Pinned). Not in the thesis (tissue = 0 is its model); a spring mesh has no bending
     stiffness, so under muscle pull it wrinkles and creeps without ever settling, and
     these springs give every mode a restoring force. ``hold`` holds the skin over the
     mandible and the lid contours to their targets while the jaw and lids move."""
     for i in range(xp.shape[0]):
-        k = model.tissue + control.hold[i]
+        k = model.tissue + model.tie[i] + control.hold[i]
         forces.stiffness[i] -= k
         forces.links.diagonal[i] += k
         for d in range(3):

@@ -120,6 +120,7 @@ class Model:
     rest_area: np.ndarray  # (t,)
     rest_against: np.ndarray  # (t,) bool: faces against the skin around it at rest (kernels._against_surroundings)
     pinned: np.ndarray  # (n,) bool
+    tie: np.ndarray  # (n,) stiffness tying a tied rim to the bones (muscles.Pinned), 0 elsewhere
     neighbour_start: np.ndarray  # (n+1,)
     neighbour_index: np.ndarray  # (2s,)
     ring_start: np.ndarray  # (n+1,) one-ring triangles (i, ring_a, ring_b), counter-clockwise
@@ -228,12 +229,14 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
     opposite = np.linalg.norm(x[repulsion_edge[:, 1]] - x[repulsion_edge[:, 0]], axis=1)
     altitude = 2 * np.repeat(mesh.face_areas, 3) / opposite
 
+    resolution = float(mesh.face_areas.sum() / n / REFERENCE_VERTEX_AREA)
     pinned = np.zeros(n, dtype=bool)
     pinned[muscles.pinned] = True
+    tie = np.zeros(n)  # a tied rim's springs, per vertex as the tissue's (resolved_material)
+    tie[muscles.tied] = muscles.tie * resolution
     hinge, hinge_weight = bending_hinges(x, faces)
 
     axis_x, axis_z, radius = mesh.vertical_axis
-    resolution = float(mesh.face_areas.sum() / n / REFERENCE_VERTEX_AREA)
     start, index = mesh.neighbours
     arrays = {key: _frozen(value) for key, value in dict(
         rest_position=x,
@@ -242,6 +245,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         rest_against=against_surroundings(x, faces),
         rest_area=mesh.face_areas,
         pinned=pinned,
+        tie=tie,
         neighbour_start=start,
         neighbour_index=index,
         ring_start=ring_start,

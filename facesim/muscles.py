@@ -26,7 +26,7 @@ muscle pull.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
@@ -136,9 +136,17 @@ class Pinned(Strict):
     (``attachments``, the thesis's face) each linear muscle's attachment. A head's skin is
     tied to the skull everywhere by the hypodermis (facesim.model.Material.tissue), so
     its attachments need no pin, and unpinned they let the skin over the cheekbone and
-    the brow move under other muscles (a cheek raiser lifts the zygomaticus's origin)."""
+    the brow move under other muscles (a cheek raiser lifts the zygomaticus's origin).
 
-    boundary: Literal["outer", "none"] = "outer"
+    ``boundary``: the outer rim pinned (``outer``, the thesis's face), free (``none``), or
+    ``tied``: held where the bones put it by springs of stiffness ``tie`` (the units of
+    Material.tissue) on top of the hypodermis, standing for the skin beyond the cut (the
+    scalp over the galea, the neck), which gives a little: ICT's brow raiser and lowerer
+    move the forehead's top edge 3 mm, which a pinned rim cannot (a crease), while a free
+    one lets the inner brow raiser drag the whole forehead."""
+
+    boundary: Literal["outer", "tied", "none"] = "outer"
+    tie: float = Field(0.0, ge=0, description="stiffness tying a tied rim's vertices to the bones")
     vertices: list[int] = []
     attachments: bool = True
 
@@ -206,7 +214,8 @@ class MuscleSet:
     centre_start, centre_index : the vertices whose mean is O (a linear muscle's
     attachment, a sphincter's centre points), in compressed rows; ring : a sphincter's ring
     vertices (empty for a linear muscle); zone : (M,) radians; falloff : (M, 2) r and r_max
-    in muscle lengths or ring radii; force : (M,); pinned : (p,) int64.
+    in muscle lengths or ring radii; force : (M,); pinned : (p,) int64; tied : the rim's
+    vertices tied to the bones with stiffness ``tie`` (Pinned), (q,) int64.
     """
 
     names: tuple[str, ...]
@@ -220,6 +229,8 @@ class MuscleSet:
     falloff: np.ndarray
     force: np.ndarray
     pinned: np.ndarray
+    tied: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    tie: float = 0.0
     jaw: JawRig | None = None
     eyelids: tuple[EyelidRig, ...] = ()
     source: str = ""
@@ -315,10 +326,14 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
     for v in spec.pinned.vertices:
         _snap(v, mesh, f"{source}: pinned")
     pinned = {a for a in attachment if a >= 0 and spec.pinned.attachments} | set(spec.pinned.vertices)
-    if spec.pinned.boundary == "outer":
+    tied = np.zeros(0, dtype=np.int64)
+    if spec.pinned.boundary != "none":
         if not mesh.boundary_loops:
-            raise InputError(f"{source}: pinned: the mesh has no boundary to pin (a closed head?)")
-        pinned |= set(mesh.boundary_loops[0].tolist())
+            raise InputError(f"{source}: pinned: the mesh has no boundary to {'pin' if spec.pinned.boundary == 'outer' else 'tie'} (a closed head?)")
+        if spec.pinned.boundary == "outer":
+            pinned |= set(mesh.boundary_loops[0].tolist())
+        else:
+            tied = np.setdiff1d(mesh.boundary_loops[0], sorted(pinned)).astype(np.int64)
     for m, k, i in zip(spec.muscles, kind, insertion):
         if k == LINEAR and i in pinned:
             raise InputError(f"{source}: muscle {m.name}: insertion: vertex {i} is pinned (the rim, or an attachment) "
@@ -358,6 +373,8 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         falloff=np.array(falloff, dtype=np.float64).reshape(-1, 2),
         force=np.array(force, dtype=np.float64),
         pinned=np.array(sorted(pinned), dtype=np.int64),
+        tied=tied,
+        tie=float(spec.pinned.tie) if len(tied) else 0.0,
         jaw=jaw,
         eyelids=tuple(eyelids),
         source=source,

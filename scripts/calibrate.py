@@ -4,7 +4,8 @@ For each action unit, the muscles it drives (facesim.timeline.ACTION_UNITS) have
 force f (eq. 3.1), angular zone α (eq. 3.2) and radial falloff r, r_max (eq. 3.3)
 searched by Nelder-Mead, left and right together, so that the unit simulated alone at
 full intensity (facesim.calibration.hold) matches ICT's displacement at the simulated
-vertices (``tests/data/ict_action_units.npz``) in direction and amplitude, with no
+vertices, carried over the head's face area, against ICT's shape there
+(``tests/data/ict_action_units.npz``) in direction and amplitude, with no
 inverted triangle and settling. The loss is
 
     (1 - cosine) + ½ ln(amplitude)² + 0.3 inverted + ⅒ max(0, log10(unsettled / 1e-3)),
@@ -69,11 +70,12 @@ class Calibration:
         self.defaults = self.raw.get("defaults", {})
         data = np.load(DATA)
         self.ict = {str(au): d.astype(np.float64) for au, d in zip(data["action_units"], data["displacement"])}
+        #: ICT's shapes over the face area, what the fit is measured against (as REALISM.md is)
+        self.ict_face = {str(au): d.astype(np.float64) for au, d in zip(data["action_units"], data["face_area"])}
         self.material = material
         self.mirror = mirror_map(self.mesh.vertices, self.mesh.faces)
         # the head and its follow do not change with the muscles: built once, not per evaluation
         self.figure = figure_for(self.model(self.raw))
-        self.ict_face = {au: on_face(self.figure, d) for au, d in self.ict.items()}
 
     def entries(self, au: str) -> list[list[dict]]:
         """The muscle file's entries an action unit drives, grouped by muscle (left and

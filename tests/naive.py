@@ -230,7 +230,7 @@ def step(model, x, v, activation, h):
     xp = np.where(free[:, None], x + h * v, x)
     unit = model.length_unit
     stiff, pull = spring_terms(x, xp, model.spring_indices, model.spring_rest_length, mat.stiffness, mat.nonlinearity, unit)
-    s, p = tissue_terms(x, target, mat.tissue, hold)
+    s, p = tissue_terms(x, target, mat.tissue + model.tie, hold)
     stiff, pull = stiff + s, pull + p
     if mat.edge_repulsion:
         s, p = repulsion_terms(x, xp, model.repulsion_vertex, model.repulsion_edge, model.repulsion_rest_distance,

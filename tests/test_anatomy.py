@@ -186,3 +186,27 @@ def test_mpeg4_parameters_name_the_jaw_and_the_lids(model, tmp_path):
                                     "timeline": [{"target": "close_t_r_eyelid", "keys": [[0, 0.3]]}]}))
     last = dict(zip(model.muscles.names, activation_table(load_spec(path), model.muscles)[-1]))
     assert last["jaw"] == 0.5 and last["eyelid_l"] == 1.0 and last["eyelid_r"] == pytest.approx(0.3)
+
+
+def test_a_tied_rim_gives_between_a_pinned_and_a_free_one(tmp_path, mesh):
+    """The brow raiser (AU2) moves the forehead's top edge as ICT's scans do only if the
+    rim gives: pinned, it stays put (the crease at the mask's edge); tied (the default
+    head's), it moves; free, it moves further, held by the hypodermis alone."""
+    from facesim.calibration import hold
+    from facesim.config import DEFAULT_MUSCLES
+    from facesim.simulate import model_for
+    from facesim.spec import Spec
+
+    rim = mesh.boundary_loops[0]
+    forehead = rim[mesh.vertices[rim, 1] > np.percentile(mesh.vertices[:, 1], 80)]
+    raised = {}
+    for boundary in ("outer", "tied", "none"):
+        data = yaml.safe_load(DEFAULT_MUSCLES.read_text())
+        data["pinned"]["boundary"] = boundary
+        path = tmp_path / f"{boundary}.muscles.yaml"
+        path.write_text(yaml.safe_dump(data))
+        held = hold(model_for(Spec.model_validate(dict(name=boundary, frames=1, muscles=str(path)))), "AU2")
+        assert held.inverted == 0
+        raised[boundary] = float(held.displacement[forehead, 1].mean())
+    assert raised["outer"] == 0.0
+    assert 0.05 < raised["tied"] < raised["none"]

@@ -5,7 +5,7 @@ import pytest
 import yaml
 
 from conftest import EXPRESSIONS
-from facesim.config import DEFAULT_MUSCLES, HOPPER_MUSCLES
+from facesim.config import DEFAULT_MUSCLES, HOPPER_MESH, HOPPER_MUSCLES
 from facesim.errors import InputError
 from facesim.mesh import load_mesh
 from facesim.muscles import LINEAR, load_muscles
@@ -45,14 +45,22 @@ def test_indices_valid_and_on_the_side_the_name_says(mesh, muscles):
     assert muscles.controls == ("jaw", "eyelid_r", "levator_palpebrae_r", "eyelid_l", "levator_palpebrae_l")
 
 
-def test_the_rim_is_pinned_attachments_as_the_file_says_insertions_never(mesh, muscles):
-    """The default head's file leaves its attachments free (its hypodermis holds the
-    skin), the thesis's face pins them (test below)."""
+def test_the_rim_is_tied_attachments_as_the_file_says_insertions_never(mesh, muscles):
+    """The default head's file ties its rim to the skull (the skin beyond the cut) and
+    leaves its attachments free (its hypodermis holds the skin); the thesis's face pins
+    both (test below and the next)."""
     pinned = set(muscles.pinned.tolist())
     attachments = set(muscles.attachment[muscles.kind == LINEAR].tolist())
-    assert set(mesh.boundary_loops[0].tolist()) <= pinned
+    assert set(muscles.tied.tolist()) == set(mesh.boundary_loops[0].tolist()) and muscles.tie > 0
+    assert not set(muscles.tied.tolist()) & pinned
     assert (attachments <= pinned) == yaml.safe_load(DEFAULT_MUSCLES.read_text()).get("pinned", {}).get("attachments", True)
     assert not set(muscles.insertion.tolist()) & pinned
+
+
+def test_the_thesis_faces_rim_is_pinned():
+    mesh = load_mesh(HOPPER_MESH)
+    hopper = load_muscles(HOPPER_MUSCLES, mesh)
+    assert set(mesh.boundary_loops[0].tolist()) <= set(hopper.pinned.tolist()) and len(hopper.tied) == 0
 
 
 def write_muscles(tmp_path, change, source=HOPPER_MUSCLES):
