@@ -595,17 +595,33 @@ where a step's time goes.
   What would close it for large meshes: a vertex order along a space-filling curve
   (scipy's reverse Cuthill-McKee) and per-thread force buffers over the springs and pairs.
 - **25 frames per second end to end on the head at 512², antialiased.** Rendering is the
-  cost: 26,719 vertices in nine materials through pyrender's PBR shader in Mesa's
-  software rasteriser. Any multisampled framebuffer costs about 108 ms a frame (2 or 4
-  samples alike); facesim supersamples (1024², one sample, averaged: about 90 ms), and
-  without antialiasing a frame is about 35 ms. Simulation (about 1 ms a frame) and
-  encoding (overlapped) are small. What would close it: a GPU, or a lighter shader (one
-  light, no PBR) and drawing only the parts in view.
-- **3 s for `facesim render` in a fresh process.** About 1 s of imports (facesim, Numba,
-  pyrender, trimesh, scipy), 0.5 s to load the head and check it, 0.3 s for the GL
-  context, then 35 frames at about 90 ms. The head's skin weights (1.2 s to solve) are
-  read from an on-disk cache in 0.1 s. What would close it: the frame cost above, or
-  a long-lived render server keeping the imports and the context warm.
+  cost: 26,719 vertices in nine materials through facesim's lit shader (pyrender's BRDF
+  without the light types facesim does not use) in Mesa's software rasteriser. Measured
+  on 2026-12-01, EGL, warm, per frame: drawing and reading back 34 ms at 256², 47 ms at
+  512² and 114 ms at 1024² (about 30 ms a frame whatever the size, for the vertices and
+  triangles, and 80 ms per million pixels); around it the head's interpolation 4 ms, the
+  normals 0.7 ms, the buffer uploads 2-3 ms, and the 2x2 average 11 ms (one thread).
+  Antialiasing draws at 1024², so a frame is about 130 ms; multisampling costs more in
+  llvmpipe (108 ms at 512² with 2 or 4 samples). Simulation (about 1.5 ms a frame) and
+  encoding (overlapped) are small. Tried the same day, side by side in one process at
+  512² antialiased: the skin drawn first so that the depth test discards the teeth and
+  mouth behind it gains nothing measurable; culling the skin's back faces 8-18% (not
+  taken: a saving that size does not reach the target). What would close it: a GPU; on
+  the CPU, an edge-directed filter on the 512² frame in place of drawing four times the
+  pixels.
+- **3 s for `facesim render` in a fresh process.** Profiled on 2026-12-01 (9.3-10.2 s
+  wall that day): imports about 1.1 s (facesim, Numba's cached kernels, pyrender,
+  trimesh, scipy); the model 2.7 s (the head archive read and checked 1.1 s, the model's
+  arrays 1.4 s); the GL context and scene 1.0 s; the 35 frames 5.1 s. What would close
+  it: the frame cost above (at 25 frames a second the frames alone take 1.4 s), the
+  model's arrays kept in facesim's on-disk cache as the skin weights are, or a
+  long-lived render server keeping imports, model and context warm.
+- **50 ms for happy on the head.** In the run above the figure is near the bound
+  either way: the same code measured 40 ms on 2026-11-23, and the Hopper face's
+  unchanged code 27 ms then against 35 ms in this run, on the same kind of machine.
+  Side by side in one process (2026-12-01), the head's tied rim (issue 16) costs 7%
+  over a pinned one: 48.4 against 45.3 ms. The profile above names the muscles'
+  back-projection and the preconditioner as the largest parts of a step.
 """
 
 
