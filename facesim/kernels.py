@@ -227,9 +227,10 @@ def _spring_forces(model, xp, forces):
 def _tissue_forces(model, xp, control, forces):
     """Hypodermis springs: each vertex tied to its target (its rest position, moved by the
     jaw and eyelids) with stiffness k_t + tie_i + hold_i, the soft tissue that attaches
-    skin to bone (tie_i: a tied rim's, the skin beyond the cut, muscles.Pinned). Not in the thesis (tissue = 0 is its model); a spring mesh has no bending
-    stiffness, so under muscle pull it wrinkles and creeps without ever settling, and
-    these springs give every mode a restoring force. ``hold`` holds the skin over the
+    skin to bone (tie_i: a tied rim's, the skin beyond the cut, muscles.Pinned). Not in
+    the thesis (tissue = 0 is its model); a spring mesh has no bending stiffness, so under
+    muscle pull it wrinkles and creeps without ever settling, and these springs give
+    every mode a restoring force. ``hold`` holds the skin over the
     mandible and the lid contours to their targets while the jaw and lids move."""
     for i in range(xp.shape[0]):
         k = model.tissue + model.tie[i] + control.hold[i]

@@ -150,6 +150,13 @@ class Pinned(Strict):
     vertices: list[int] = []
     attachments: bool = True
 
+    @model_validator(mode="after")
+    def _tie_with_a_tied_rim(self):
+        if (self.boundary == "tied") != (self.tie > 0):
+            raise ValueError(f"tie: expected a positive stiffness with boundary: tied and none otherwise, "
+                             f"got tie {self.tie:g} with boundary {self.boundary}")
+        return self
+
 
 class MuscleFile(Strict):
     units: Literal["cm"] = "cm"

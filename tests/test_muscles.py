@@ -90,6 +90,9 @@ def first(data):
         (lambda d: first(d).update(name="Frontalis"), r"muscles -> 0 -> linear -> name: Value error, must be snake_case"),
         (lambda d: first(d).update(falloff=[1.5, 1.0]), r"falloff: Value error, must be \[r, r_max\]"),
         (lambda d: first(d).update(attachment=[40.0, 0.0, 0.0]), r"muscle frontalis_medial_r: attachment: point \[40.0, 0.0, 0.0\] is \d+\.\d+ cm from the surface"),
+        (lambda d: d["pinned"].update(boundary="tied"), r"pinned: Value error, tie: expected a positive stiffness with boundary: tied"),
+        (lambda d: d["pinned"].update(tie=500), r"pinned: Value error, tie: expected a positive stiffness .* got tie 500 with boundary outer"),
+        (lambda d: d["pinned"].update(boundary="tied", tie=-1), r"pinned -> tie: Input should be greater than or equal to 0"),
     ],
 )
 def test_bad_muscle_files_give_one_line_naming_file_and_muscle(tmp_path, mesh, change, message):
