@@ -363,12 +363,17 @@ def test_links_are_the_jacobian_of_the_springs_tissue_and_bending(model, rng):
     assert_close(product.reshape(-1), dense_stiffness(forces.links, len(x)) @ p.reshape(-1))
 
 
+@pytest.mark.parametrize("face", ["head", "hopper"])
 @pytest.mark.parametrize("bending", [0.0, 100.0], ids=["jacobi", "rest-factor"])
-def test_implicit_step_solves_its_system(rng, bending):
+def test_implicit_step_solves_its_system(rng, bending, face):
     """The conjugate gradients reach the solution of (m + Δt C + Δt² K) V' = m V + Δt F +
     Δt² K V (solver docstring), solved densely from the same terms, at the free vertices,
-    with either preconditioner: Jacobi, or the factorised rest system (a skin with bending)."""
-    model = model_for(spec("happy", material=material(tolerance=1e-10, iterations=2000, bending=bending)))
+    with either preconditioner: Jacobi, or the factorised rest system (a skin with bending),
+    on the head (its rim tied, nothing pinned) and on the Hopper face (its rim pinned:
+    those vertices keep still)."""
+    where = {} if face == "head" else dict(mesh=HOPPER_MESH, muscles=None)
+    model = model_for(spec("happy", **where, material=material(tolerance=1e-10, iterations=2000, bending=bending)))
+    assert model.pinned.any() == (face == "hopper")
     x, _ = perturbed(model, rng, scale=0.03)
     x[model.pinned] = model.rest_position[model.pinned]
     v = 0.3 * rng.standard_normal(x.shape)
@@ -398,7 +403,7 @@ def test_implicit_step_solves_its_system(rng, bending):
     assert np.abs(moved[~contact]).max() < 1e-12
     keep = np.repeat(~contact, 3) & free
     assert_close(state.v.reshape(-1)[keep], expected[keep], rtol=1e-6)
-    assert np.abs(state.v[model.pinned]).max(initial=0.0) == 0.0  # the default head pins none: its rim is tied
+    assert np.abs(state.v[model.pinned]).max(initial=0.0) == 0.0
 
 
 def test_back_projection_turns_continuously_with_the_force(model):
