@@ -208,6 +208,29 @@ def _colour_only(renderer) -> None:
     renderer.read_depth_buf = lambda: None
 
 
+class _InsertionOrder(dict):
+    """A set that iterates in the order its members were added (a dict's keys)."""
+
+    def add(self, item) -> None:
+        self[item] = None
+
+    def remove(self, item) -> None:
+        del self[item]
+
+    def discard(self, item) -> None:
+        self.pop(item, None)
+
+
+def _stable_draw_order(scene) -> None:
+    """Make a pyrender Scene draw its meshes in the same order in every process. pyrender
+    keeps them in a set, whose order follows their memory addresses, and sorts them by
+    the distance of their nodes from the camera: every part of a head hangs from one
+    node, so the sort ties and the draw order changed from run to run. The eyelashes are
+    blended, so that order showed: a sample of a dataset differed by a pixel between two
+    runs of the same seed. In the order they were added, the sort keeps it (it is stable)."""
+    scene._mesh_nodes = _InsertionOrder.fromkeys(scene._mesh_nodes)
+
+
 @njit(**NUMBA_OPTIONS)
 def _downsample(image, factor, out):
     """The mean of each ``factor`` x ``factor`` block of ``image`` (H, W, C) uint8 into
@@ -316,6 +339,7 @@ class FaceRenderer:
         self._head = pyrender.Node(name="head", matrix=np.eye(4))
         scene = pyrender.Scene(bg_color=BACKGROUND, ambient_light=(0.28, 0.26, 0.26))
         scene.add_node(self._head)
+        _stable_draw_order(scene)
         self._eyes: list[tuple] = []
         if figure is None:
             self._faces = np.ascontiguousarray(faces, dtype=np.int64)
