@@ -43,7 +43,7 @@ ModelArrays = namedtuple("ModelArrays", [
     "spring_indices", "spring_rest_length", "repulsion_vertex", "repulsion_edge", "repulsion_rest_distance",
     "hinge", "hinge_weight",
     "muscle_kind", "muscle_axes", "muscle_insertion", "muscle_centre_start", "muscle_centre_index",
-    "muscle_cos_zone", "muscle_r", "muscle_r_max", "muscle_force", "axis_x", "axis_z", "radius",
+    "muscle_cos_zone", "muscle_r", "muscle_r_max", "muscle_force", "muscle_protrusion", "rest_vertex_normal", "axis_x", "axis_z", "radius",
     "jaw_column", "jaw_weight", "jaw_hinge", "jaw_axis", "jaw_max", "lid_column", "lid_centre", "lid_delta",
     "lid_raise_column", "lid_raise_delta", "drive_column", "drive_weight", "contact_upper", "contact_lower", "contact_gap",
     "mass", "damping", "stiffness", "nonlinearity", "repulsion_nonlinearity", "length_unit", "tissue", "drive",
@@ -564,7 +564,14 @@ def _muscle_forces(model, xp, control, work, forces):
     muscles falls deeper into their falloff and is pulled harder still; at the forces of
     a full smile that feedback outweighs the skin and the mouth slides sideways (measured:
     happy held, the lower lip 1 cm off the midline from a 1e-16 asymmetry).
-    ``regions: moving`` in the material keeps the thesis's form."""
+    ``regions: moving`` in the material keeps the thesis's form.
+
+    A sphincter with a ``protrusion`` p also pushes its region outward, along the skin's
+    rest normal n, with p a f δ: a ring of incompressible tissue squeezed toward its
+    centre bulges forward (the orbicularis oris pouting the lips in a pucker, AU18). Not in
+    the thesis (p = 0 is its model), where a ring only pulls in its own plane and a pucker
+    cannot leave the face's surface. The push keeps its direction, so it adds no
+    stiffness."""
     _muscle_frame(model, xp, work.frame)
     frame = work.frame
     if model.attached_regions:
@@ -590,8 +597,9 @@ def _muscle_forces(model, xp, control, work, forces):
             else:
                 for d in range(3):
                     f3[d] *= scale
+            push = a_m * model.muscle_force[m] * work.delta[k] * model.muscle_protrusion[m]
             for d in range(3):
-                forces.force[i, d] += f3[d]
+                forces.force[i, d] += f3[d] + push * model.rest_vertex_normal[i, d]
 
 
 @njit(**NUMBA_OPTIONS)

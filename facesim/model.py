@@ -144,6 +144,8 @@ class Model:
     muscle_r: np.ndarray  # (M,) r of eq. 3.3 (cm)
     muscle_r_max: np.ndarray  # (M,) r_max of eq. 3.3 (cm)
     muscle_force: np.ndarray  # (M,) peak force f
+    muscle_protrusion: np.ndarray  # (M,) a sphincter's forward push per unit of its pull (muscles.SphincterEntry)
+    rest_vertex_normal: np.ndarray  # (n, 3) unit, outward: the direction a sphincter's protrusion pushes
     axis_x: float
     axis_z: float
     radius: float
@@ -264,6 +266,8 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         muscle_centre_index=muscles.centre_index,
         muscle_cos_zone=np.cos(muscles.zone),
         muscle_force=muscles.force * resolution,
+        muscle_protrusion=muscles.protrusion if len(muscles.protrusion) == muscles.count else np.zeros(muscles.count),
+        rest_vertex_normal=_vertex_normals_at_rest(x, faces),
         # the falloffs, in muscle lengths, are set below, from the muscles' ends at rest
         muscle_axes=np.zeros((muscles.count, 2)),
         muscle_r=np.zeros(muscles.count),
@@ -346,6 +350,15 @@ def ellipse_axes(points: np.ndarray, where: str) -> tuple[float, float]:
     if p <= 0 or q <= 0:
         raise InputError(f"{where}: does not surround its centre")
     return 1 / np.sqrt(p), 1 / np.sqrt(q)
+
+
+def _vertex_normals_at_rest(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(n, 3) the area-weighted unit normals of the rest surface (kernels._vertex_normals)."""
+    from .kernels import _vertex_normals
+
+    out = np.empty((len(x), 3))
+    _vertex_normals(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64), out)
+    return out
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:

@@ -84,6 +84,7 @@ class SphincterEntry(_Muscle):
     kind: Literal["sphincter"]
     centre: list[Point] = Field(..., min_length=1)
     ring: list[Point] = Field(..., min_length=4)
+    protrusion: float = Field(0.0, ge=0, le=20, description="the forward push of the ring's contraction, per unit of its pull")
 
 
 class _Contours(Strict):
@@ -221,7 +222,8 @@ class MuscleSet:
     centre_start, centre_index : the vertices whose mean is O (a linear muscle's
     attachment, a sphincter's centre points), in compressed rows; ring : a sphincter's ring
     vertices (empty for a linear muscle); zone : (M,) radians; falloff : (M, 2) r and r_max
-    in muscle lengths or ring radii; force : (M,); pinned : (p,) int64; tied : the rim's
+    in muscle lengths or ring radii; force : (M,); protrusion : (M,) a sphincter's forward
+    push per unit of its pull (0 for a linear muscle); pinned : (p,) int64; tied : the rim's
     vertices tied to the bones with stiffness ``tie`` (Pinned), (q,) int64.
     """
 
@@ -236,6 +238,7 @@ class MuscleSet:
     falloff: np.ndarray
     force: np.ndarray
     pinned: np.ndarray
+    protrusion: np.ndarray = field(default_factory=lambda: np.zeros(0))
     tied: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     tie: float = 0.0
     jaw: JawRig | None = None
@@ -299,7 +302,7 @@ def _upper_over_lower(mesh: FaceMesh, upper: np.ndarray, lower: np.ndarray, wher
 def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -> MuscleSet:
     """Check a muscle file against a mesh and resolve it to arrays."""
     width = float(np.ptp(mesh.vertices[:, 0]))
-    kind, attachment, insertion, centres, rings, zone, falloff, force = [], [], [], [], [], [], [], []
+    kind, attachment, insertion, centres, rings, zone, falloff, force, protrusion = [], [], [], [], [], [], [], [], []
     for m in spec.muscles:
         where = f"{source}: muscle {m.name}"
         if m.kind == "linear":
@@ -315,6 +318,7 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
             rings.append(np.zeros(0, dtype=np.int64))
             zone.append(np.radians(m.zone or spec.defaults.zone))
             falloff.append(m.falloff or spec.defaults.falloff)
+            protrusion.append(0.0)
         else:
             centre = [_snap(p, mesh, f"{where}: centre") for p in m.centre]
             ring = np.array([_snap(p, mesh, f"{where}: ring") for p in m.ring], dtype=np.int64)
@@ -329,6 +333,7 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
             rings.append(ring)
             zone.append(np.pi)
             falloff.append(m.falloff or (1.0, 1.5))
+            protrusion.append(m.protrusion)
         force.append(m.force or spec.defaults.force)
     for v in spec.pinned.vertices:
         _snap(v, mesh, f"{source}: pinned")
@@ -379,6 +384,7 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         zone=np.array(zone, dtype=np.float64),
         falloff=np.array(falloff, dtype=np.float64).reshape(-1, 2),
         force=np.array(force, dtype=np.float64),
+        protrusion=np.array(protrusion, dtype=np.float64),
         pinned=np.array(sorted(pinned), dtype=np.int64),
         tied=tied,
         tie=float(spec.pinned.tie) if len(tied) else 0.0,

@@ -90,7 +90,7 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     "AU15": ("lip corner depressor", {"depressor_anguli_oris": 1.0}),
     "AU16": ("lower lip depressor", {"depressor_labii_inferioris": 1.0}),
     "AU17": ("chin raiser", {"mentalis": 1.0}),
-    "AU18": ("lip pucker", {"orbicularis_oris": 1.0}),
+    "AU18": ("lip pucker", {"incisivus_labii": 1.0}),
     "AU20": ("lip stretcher", {"risorius": 1.0}),
     "AU22": ("lip funneler", {"orbicularis_oris": 0.7}),
     "AU23": ("lip tightener", {"orbicularis_oris": 0.8}),

@@ -179,6 +179,7 @@ def muscle_forces(model, xp, activation, target=None):
             direction = origin - frame[i]
             f = activation[m] * model.muscle_force[m] * d[i] * direction / np.linalg.norm(direction)
             force[i] += back_project(i, f, frame, xp, model.faces, edges) if use_uv else f
+            force[i] += activation[m] * model.muscle_force[m] * d[i] * model.muscle_protrusion[m] * model.rest_vertex_normal[i]
     return force
 
 
