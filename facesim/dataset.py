@@ -78,18 +78,13 @@ class DatasetSettings:
 
 def sample(seed: int, index: int, available_aus: list[str]) -> dict:
     """The draw of one sample: which expression or action units, and the view."""
-    from .timeline import EXCLUSION
-
     rng = np.random.default_rng([seed, index])
     draw: dict = {"expression": None, "intensity": None, "aus": {}}
     if rng.random() < 0.5:
         draw["expression"] = BASIC[rng.integers(len(BASIC))]
         draw["intensity"] = round(float(rng.uniform(0.5, 1.0)), 4)
     else:
-        chosen: list[str] = []
-        for au in rng.permutation(available_aus)[: rng.integers(1, 4)]:
-            if not any({au, other} == set(pair) for pair in EXCLUSION for other in chosen):
-                chosen.append(str(au))
+        chosen = [str(au) for au in rng.permutation(available_aus)[: rng.integers(1, 4)]]
         draw["aus"] = {au: round(float(rng.uniform(0.3, 1.0)), 4) for au in sorted(chosen)}
     draw["yaw"], draw["pitch"], draw["light"] = rng.uniform(-15, 15), rng.uniform(-8, 8), rng.uniform(0.8, 1.2)
     draw.update({name: rng.uniform(-limit, limit) for name, limit in POSE_JITTER.items()})

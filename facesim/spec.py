@@ -39,7 +39,7 @@ from .errors import InputError
 from .model import Material
 from .muscles import MuscleSet
 from .schema import Strict, load_model
-from .timeline import (INTERPOLATIONS, MPEG4_FAPS, apply_cooccurrence, au_muscles, check_exclusions, envelope_keys,
+from .timeline import (INTERPOLATIONS, MPEG4_FAPS, apply_cooccurrence, au_muscles, envelope_keys,
                        interpolate, parse_intensity)
 
 Activation = Annotated[float, Field(ge=0.0, le=1.0)]
@@ -176,7 +176,6 @@ class Spec(Strict):
             if not re.fullmatch(r"AU\d+", au):
                 raise ValueError(f"{au!r} is not an action unit name such as AU12")
             out[au] = parse_intensity(value)
-        check_exclusions(out)
         return out
 
     @field_validator("expressions")
@@ -378,10 +377,6 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
             table += np.outer(curve, muscle_vector(track.target, where))
         else:
             table += np.outer(curve, expression_vector(track.target))
-    try:
-        check_exclusions(au_curves)
-    except ValueError as exc:
-        fail("aus", str(exc))
     for au, curve in apply_cooccurrence({a: np.clip(c, 0, 1) for a, c in au_curves.items()}).items():
         table += np.outer(curve, au_vector(au, f"aus -> {au}"))
 

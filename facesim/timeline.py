@@ -86,7 +86,7 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     "AU11": ("nasolabial deepener", {"zygomaticus_minor": 1.0}),
     "AU12": ("lip corner puller", {"zygomaticus_major": 1.0}),
     "AU13": ("sharp lip puller", {"levator_anguli_oris": 1.0}),
-    "AU14": ("dimpler", {"risorius": 0.6}),
+    "AU14": ("dimpler", {"buccinator": 1.0}),
     "AU15": ("lip corner depressor", {"depressor_anguli_oris": 1.0}),
     "AU16": ("lower lip depressor", {"depressor_labii_inferioris": 1.0}),
     "AU17": ("chin raiser", {"mentalis": 1.0}),
@@ -112,12 +112,9 @@ FACS_LETTERS = {"A": 0.2, "B": 0.4, "C": 0.6, "D": 0.8, "E": 1.0}
 #: domination: when both act, the dominated AU is weakened by the dominant one,
 #:   I_dominated * (1 - I_dominant) (FACS: AU15 dominates AU12);
 #: opposition: antagonists acting on the same tissue cancel, the stronger keeps the
-#:   difference (AU16 pulls the lower lip down, AU17 pushes it up);
-#: exclusion: AUs that the model cannot show together are an error in a spec (AU14 and
-#:   AU20 both come from the risorius here).
+#:   difference (AU16 pulls the lower lip down, AU17 pushes it up).
 DOMINATION = [("AU15", "AU12")]
 OPPOSITION = [("AU16", "AU17")]
-EXCLUSION = [("AU14", "AU20")]
 
 
 def parse_intensity(value) -> float:
@@ -131,16 +128,6 @@ def parse_intensity(value) -> float:
     if not 0.0 <= value <= 1.0:
         raise ValueError(f"intensity must be between 0 and 1, got {value}")
     return value
-
-
-def check_exclusions(aus) -> None:
-    for a, b in EXCLUSION:
-        if a in aus and b in aus:
-            raise ValueError(f"{a} and {b} exclude each other (both are the {_muscle_words(a)} in this face)")
-
-
-def _muscle_words(au: str) -> str:
-    return " and ".join(m.replace("_", " ") for m in ACTION_UNITS[au][1])
 
 
 def apply_cooccurrence(intensity: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

@@ -37,7 +37,6 @@ def test_the_draw_depends_on_seed_and_index_only():
     assert sample(7, 3, aus) != sample(8, 3, aus)
     draws = [sample(7, i, aus) for i in range(200)]
     assert 60 < sum(d["expression"] is not None for d in draws) < 140
-    assert not any({"AU14", "AU20"} <= set(d["aus"]) for d in draws)
     for name, limit in POSE_JITTER.items():  # head and gaze turned within their limits, both ways
         angles = np.array([d[name] for d in draws])
         assert np.abs(angles).max() <= limit and angles.min() < -limit / 2 and angles.max() > limit / 2

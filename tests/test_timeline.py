@@ -112,16 +112,14 @@ def test_an_action_unit_without_its_muscles_is_an_error(tmp_path, mesh):
         table(tmp_path, muscles, aus={"AU12": "F"})
 
 
-def test_domination_opposition_and_exclusion(tmp_path, muscles):
+def test_domination_and_opposition(tmp_path, muscles):
     t = table(tmp_path, muscles, onset=0, aus={"AU12": 1.0, "AU15": 0.75, "AU16": 0.9, "AU17": 0.3})[-1]
     last = dict(zip(muscles.names, t))
     assert last["zygomaticus_major_l"] == pytest.approx(0.25)  # AU15 dominates AU12
     assert last["depressor_anguli_oris_l"] == 0.75
     assert last["depressor_labii_inferioris_l"] == pytest.approx(0.6) and last["mentalis_l"] == 0  # opposition
-    with pytest.raises(InputError, match="AU14 and AU20 exclude each other"):
-        table(tmp_path, muscles, aus={"AU14": 0.5, "AU20": 0.5})
-    with pytest.raises(InputError, match="AU14 and AU20 exclude each other"):
-        table(tmp_path, muscles, aus={"AU14": 0.5}, timeline=[{"target": "AU20", "keys": [[0, 0.5]]}])
+    both = dict(zip(muscles.names, table(tmp_path, muscles, onset=0, aus={"AU14": 0.5, "AU20": 0.5})[-1]))
+    assert both["buccinator_l"] == both["risorius_l"] == 0.5  # two muscles: the dimpler and the stretcher combine
 
 
 def test_sequences_hold_each_expression_and_ease_between(tmp_path, muscles):
