@@ -66,8 +66,8 @@ def test_a_pucker_pushes_the_lips_forward_as_far_as_icts(ict, head_model):
     """ICT's pucker (AU18) moves the lips about 1 cm forward. The incisivi's ring pulls in
     the plane of the muscles' projection (eq. 3.21), which the back-projection onto the
     curved lips carries half as far forward; its protrusion (kernels._muscle_forces) pushes
-    the rest of the way (measured: 0.98 of ICT's against 0.44), and turns the unit's
-    field toward ICT's (cosine 0.90 against 0.79)."""
+    most of the rest of the way (measured: 0.84 of ICT's against 0.39), and turns the
+    unit's field toward ICT's (cosine 0.90 against 0.82)."""
     import yaml
 
     from facesim.config import HEAD_MUSCLES
@@ -86,5 +86,5 @@ def test_a_pucker_pushes_the_lips_forward_as_far_as_icts(ict, head_model):
         held = hold(model, "AU18", figure=figure)
         forward[name] = held.displacement[lips, 2].mean() / theirs
         cosine[name] = compare(on_face(figure, held.displacement), ict["AU18"]).cosine
-    assert 0.8 < forward["protruding"] < 1.25 and forward["flat"] < 0.6
+    assert 0.75 < forward["protruding"] < 1.25 and forward["flat"] < 0.5
     assert cosine["protruding"] >= COSINE and cosine["protruding"] > cosine["flat"] + 0.05
