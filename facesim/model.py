@@ -180,14 +180,13 @@ class Model:
         return len(self.muscle_force)
 
 
-def against_surroundings(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Which triangles face against the skin around them (a few, in the sharpest creases)."""
-    from .kernels import _against_surroundings, _vertex_normals
+def against_surroundings(x: np.ndarray, faces: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Which triangles face against the skin around them (a few, in the sharpest creases),
+    given the surface's vertex normals (``vertex_normals``)."""
+    from .kernels import _against_surroundings
 
     x = np.ascontiguousarray(x, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    normals = np.empty_like(x)
-    _vertex_normals(x, faces, normals)
     return np.array([_against_surroundings(x, faces, t, normals) for t in range(len(faces))], dtype=bool)
 
 
@@ -237,6 +236,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
     tie = np.zeros(n)  # a tied rim's springs, per vertex as the tissue's (resolved_material)
     tie[muscles.tied] = muscles.tie * resolution
     hinge, hinge_weight = bending_hinges(x, faces)
+    normals = vertex_normals(x, faces)  # at rest
 
     axis_x, axis_z, radius = mesh.vertical_axis
     start, index = mesh.neighbours
@@ -244,7 +244,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         rest_position=x,
         faces=faces,
         rest_normal=mesh.face_normals,
-        rest_against=against_surroundings(x, faces),
+        rest_against=against_surroundings(x, faces, normals),
         rest_area=mesh.face_areas,
         pinned=pinned,
         tie=tie,
@@ -266,8 +266,8 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         muscle_centre_index=muscles.centre_index,
         muscle_cos_zone=np.cos(muscles.zone),
         muscle_force=muscles.force * resolution,
-        muscle_protrusion=muscles.protrusion if len(muscles.protrusion) == muscles.count else np.zeros(muscles.count),
-        rest_vertex_normal=_vertex_normals_at_rest(x, faces),
+        muscle_protrusion=muscles.protrusion,
+        rest_vertex_normal=normals,
         # the falloffs, in muscle lengths, are set below, from the muscles' ends at rest
         muscle_axes=np.zeros((muscles.count, 2)),
         muscle_r=np.zeros(muscles.count),
@@ -352,8 +352,8 @@ def ellipse_axes(points: np.ndarray, where: str) -> tuple[float, float]:
     return 1 / np.sqrt(p), 1 / np.sqrt(q)
 
 
-def _vertex_normals_at_rest(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(n, 3) the area-weighted unit normals of the rest surface (kernels._vertex_normals)."""
+def vertex_normals(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(n, 3) the area-weighted unit vertex normals of a surface (kernels._vertex_normals)."""
     from .kernels import _vertex_normals
 
     out = np.empty((len(x), 3))

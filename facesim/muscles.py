@@ -238,7 +238,7 @@ class MuscleSet:
     falloff: np.ndarray
     force: np.ndarray
     pinned: np.ndarray
-    protrusion: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    protrusion: np.ndarray
     tied: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     tie: float = 0.0
     jaw: JawRig | None = None

@@ -132,14 +132,15 @@ class Calibration:
     def model(self, raw: dict):
         return build_model(self.mesh, resolve_muscles(MuscleFile.model_validate(raw), self.mesh), self.material)
 
-    def measure(self, raw: dict, au: str):
-        held = hold(self.model(raw), au, frames=self.frames, figure=self.figure)
+    def measure(self, raw: dict, au: str, model=None):
+        """The unit held on the file ``raw`` (or on its ``model``, built already) against ICT's."""
+        held = hold(self.model(raw) if model is None else model, au, frames=self.frames, figure=self.figure)
         return compare(on_face(self.figure, held.displacement), self.ict_face[au]), held
 
     def loss(self, raw: dict, au: str) -> float:
         try:
-            c, held = self.measure(raw, au)
             model = self.model(raw)
+            c, held = self.measure(raw, au, model)
             pairs = [hold(model, tuple(pair.split("+")), frames=self.frames, figure=self.figure) for pair in self.pairs]
         except (InputError, SimulationError):  # a placement off the face, a blow-up: the worst outcome, not a stop
             return 10.0
