@@ -27,7 +27,7 @@ looked settled, and at 200 its lips chattered against their contact, alone and i
 pairs. Re-run from the file's values, that search keeps them (loss 0.414).
 
 Usage: ``python scripts/calibrate.py [AU ...] [--evaluations N] [--frames N] [--pairs
-AU+AU,...] [--no-place] [--write]``.
+AU+AU,...] [--no-place] [--min-zone DEGREES] [--write]``.
 """
 
 from __future__ import annotations
@@ -267,7 +267,11 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=FRAMES, help="frames each trial is held (the fold tests hold 200)")
     parser.add_argument("--pairs", default="", help="pairs of units, such as AU18+AU23,AU18+AU24, that must settle too")
     parser.add_argument("--no-place", action="store_true", help="keep the linear muscles where the file has them")
+    parser.add_argument("--min-zone", type=float, default=BOUNDS["zone"][0],
+                        help="the narrowest angular zone searched, degrees (a cone of 15 degrees holds 1-3 of the simulated "
+                             "mesh's vertices)")
     args = parser.parse_args()
+    BOUNDS["zone"] = (args.min_zone, BOUNDS["zone"][1])
     calibration = Calibration(frames=args.frames, pairs=[p for p in args.pairs.split(",") if p])
     units = args.units or [au for au in calibration.ict if au in ACTION_UNITS and calibration.entries(au)]
     for au in units:
