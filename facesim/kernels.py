@@ -566,12 +566,13 @@ def _muscle_forces(model, xp, control, work, forces):
     happy held, the lower lip 1 cm off the midline from a 1e-16 asymmetry).
     ``regions: moving`` in the material keeps the thesis's form.
 
-    A sphincter with a ``protrusion`` p also pushes its region outward, along the skin's
-    rest normal n, with p a f δ: a ring of incompressible tissue squeezed toward its
-    centre bulges forward (the orbicularis oris pouting the lips in a pucker, AU18). Not in
-    the thesis (p = 0 is its model), where a ring only pulls in its own plane and a pucker
-    cannot leave the face's surface. The push keeps its direction, so it adds no
-    stiffness."""
+    A muscle with a ``protrusion`` p also pushes its region along the skin's rest normal
+    n, with p a f δ: outward as incompressible tissue squeezed by a contraction bulges
+    forward (the incisivi pouting the lips in a pucker, AU18), inward for p < 0 as a
+    muscle over the teeth presses the skin onto them (the buccinator drawing the lip
+    corners back into the cheek, AU14). Not in the thesis (p = 0 is its model), where a
+    muscle only pulls in its own plane and cannot move the skin off the face's surface.
+    The push keeps its direction, so it adds no stiffness."""
     _muscle_frame(model, xp, work.frame)
     frame = work.frame
     if model.attached_regions:

@@ -144,8 +144,8 @@ class Model:
     muscle_r: np.ndarray  # (M,) r of eq. 3.3 (cm)
     muscle_r_max: np.ndarray  # (M,) r_max of eq. 3.3 (cm)
     muscle_force: np.ndarray  # (M,) peak force f
-    muscle_protrusion: np.ndarray  # (M,) a sphincter's forward push per unit of its pull (muscles.SphincterEntry)
-    rest_vertex_normal: np.ndarray  # (n, 3) unit, outward: the direction a sphincter's protrusion pushes
+    muscle_protrusion: np.ndarray  # (M,) the push along the rest normal per unit of its pull (muscles._Muscle)
+    rest_vertex_normal: np.ndarray  # (n, 3) unit, outward: the direction a muscle's protrusion pushes
     axis_x: float
     axis_z: float
     radius: float

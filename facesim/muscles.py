@@ -65,6 +65,8 @@ class _Muscle(Strict):
     name: str
     falloff: tuple[float, float] | None = None
     force: float | None = Field(None, gt=0)
+    protrusion: float = Field(0.0, ge=-20, le=20, description="the push of its contraction along the skin's rest normal, "
+                              "per unit of its pull: outward (a pout) or, negative, inward (a cheek pressed to the teeth)")
 
     _names = field_validator("name")(_snake_case)
     _falloff = field_validator("falloff")(_ordered)
@@ -84,7 +86,6 @@ class SphincterEntry(_Muscle):
     kind: Literal["sphincter"]
     centre: list[Point] = Field(..., min_length=1)
     ring: list[Point] = Field(..., min_length=4)
-    protrusion: float = Field(0.0, ge=0, le=20, description="the forward push of the ring's contraction, per unit of its pull")
 
 
 class _Contours(Strict):
@@ -222,8 +223,8 @@ class MuscleSet:
     centre_start, centre_index : the vertices whose mean is O (a linear muscle's
     attachment, a sphincter's centre points), in compressed rows; ring : a sphincter's ring
     vertices (empty for a linear muscle); zone : (M,) radians; falloff : (M, 2) r and r_max
-    in muscle lengths or ring radii; force : (M,); protrusion : (M,) a sphincter's forward
-    push per unit of its pull (0 for a linear muscle); pinned : (p,) int64; tied : the rim's
+    in muscle lengths or ring radii; force : (M,); protrusion : (M,) the push along the
+    skin's rest normal per unit of its pull (the pucker's pout, the buccinator's press inward); pinned : (p,) int64; tied : the rim's
     vertices tied to the bones with stiffness ``tie`` (Pinned), (q,) int64.
     """
 
@@ -318,7 +319,6 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
             rings.append(np.zeros(0, dtype=np.int64))
             zone.append(np.radians(m.zone or spec.defaults.zone))
             falloff.append(m.falloff or spec.defaults.falloff)
-            protrusion.append(0.0)
         else:
             centre = [_snap(p, mesh, f"{where}: centre") for p in m.centre]
             ring = np.array([_snap(p, mesh, f"{where}: ring") for p in m.ring], dtype=np.int64)
@@ -333,7 +333,7 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
             rings.append(ring)
             zone.append(np.pi)
             falloff.append(m.falloff or (1.0, 1.5))
-            protrusion.append(m.protrusion)
+        protrusion.append(m.protrusion)
         force.append(m.force or spec.defaults.force)
     for v in spec.pinned.vertices:
         _snap(v, mesh, f"{source}: pinned")

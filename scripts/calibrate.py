@@ -17,8 +17,8 @@ head's muscle file from the Hopper face's: run this after it. Set ``pinned: {att
 false}`` in the file first: a linear muscle's attachment re-placed onto the cheek or brow
 must not pin the skin other units move.
 
-A sphincter with a ``protrusion`` has it searched too (its log, with the force and
-falloff). What the head's file holds came from runs of this script (REALISM.md: 12 of 21
+A muscle with a ``protrusion`` has its size searched too (its log, the sign the file's,
+with the force and falloff). What the head's file holds came from runs of this script (REALISM.md: 17 of 21
 within the bounds). The pucker's ring (AU18) was searched held over the fold tests' 200
 frames, with the pairs it fluttered in most joining the loss (``--frames 200 --pairs
 AU18+AU23,AU18+AU24,AU12+AU18,AU18+AU22``; held that long, trials are scored by the fold
@@ -63,7 +63,7 @@ INSERTIONS, LENGTHS = 6, (1.5, 2.5, 3.5, 5.0)
 #: Search bounds: force, zone (degrees), r and r_max / r (in muscle lengths or ring radii).
 #: Trials held this long are measured as the fold tests measure (tests/test_folds.py).
 REST_FRAMES = 200
-BOUNDS = {"force": (10.0, 40000.0), "zone": (5.0, 120.0), "r": (0.2, 6.0), "spread": (1.02, 4.0), "protrusion": (0.0, 20.0)}
+BOUNDS = {"force": (10.0, 40000.0), "zone": (5.0, 120.0), "r": (0.2, 6.0), "spread": (1.02, 4.0), "protrusion": (1e-3, 20.0)}
 
 
 class Calibration:
@@ -104,8 +104,8 @@ class Calibration:
             values += [math.log(m.get("force", self.defaults.get("force", 30.0))), math.log(r), math.log(r_max / r)]
             if m["kind"] == "linear":
                 values.append(math.log(m.get("zone", self.defaults.get("zone", 40.0))))
-            elif "protrusion" in m:
-                values.append(math.log(max(m["protrusion"], 1e-3)))
+            if "protrusion" in m:
+                values.append(math.log(max(abs(m["protrusion"]), 1e-3)))  # its sign is the file's
         return np.array(values)
 
     def with_parameters(self, au: str, values: np.ndarray) -> dict:
@@ -114,8 +114,8 @@ class Calibration:
         k = 0
         for group in self.entries(au):
             linear = group[0]["kind"] == "linear"
-            pushes = not linear and "protrusion" in group[0]
-            count = 4 if linear or pushes else 3
+            pushes = "protrusion" in group[0]
+            count = 3 + linear + pushes
             force, r, spread, *extra = [float(np.exp(v)) for v in values[k:k + count]]
             k += count
             force, r, spread = (float(np.clip(v, *BOUNDS[b])) for v, b in ((force, "force"), (r, "r"), (spread, "spread")))
@@ -125,8 +125,8 @@ class Calibration:
                 entry["falloff"] = [round(r, 3), round(r * spread, 3)]
                 if linear:
                     entry["zone"] = round(float(np.clip(extra[0], *BOUNDS["zone"])), 1)
-                elif pushes:
-                    entry["protrusion"] = round(float(np.clip(extra[0], *BOUNDS["protrusion"])), 3)
+                if pushes:
+                    entry["protrusion"] = round(math.copysign(float(np.clip(extra[-1], *BOUNDS["protrusion"])), m["protrusion"]), 3)
         return raw
 
     def model(self, raw: dict):
@@ -226,7 +226,8 @@ class Calibration:
                     line = _set_flow(line, "insertion", m.get("insertion"))
                     line = _set_flow(line, "zone", m.get("zone"))
                     line = _set_flow(line, "falloff", m.get("falloff"))
-                    lines[i] = _set_flow(line, "force", m.get("force"))
+                    line = _set_flow(line, "force", m.get("force"))
+                    lines[i] = _set_flow(line, "protrusion", m.get("protrusion"))
                 elif re.match(rf"\s*- name: {m['name']}(\s|$)", line):
                     j = i + 1
                     while j < len(lines) and not re.match(r"\s*- |\S", lines[j]):

@@ -178,8 +178,9 @@ def test_muscle_forces_match_reference(uv, rng):
     model = model_for(spec("happy", material=material(uv_projection=uv)))
     x, xp = perturbed(model, rng, scale=0.05)
     activation = rng.uniform(0, 1, model.muscle_count) * (rng.uniform(size=model.muscle_count) > 0.3)
-    assert model.muscle_protrusion.max() > 0  # the head's pucker pushes its lips forward (muscles.SphincterEntry)
-    activation[model.muscle_protrusion > 0] = 0.8
+    # the head's pucker pushes its lips forward, its buccinator the lip corners in (muscles._Muscle.protrusion)
+    assert model.muscle_protrusion.max() > 0 and model.muscle_protrusion.min() < 0
+    activation[model.muscle_protrusion != 0] = 0.8
     control = K.control(model.arrays, np.concatenate([activation, np.zeros(len(model.muscles.names) - len(activation))]))
     forces = K.forces(model.arrays)
     K._muscle_forces(model.arrays, xp, control, K.workspace(model.vertex_count), forces)

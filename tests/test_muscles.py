@@ -93,9 +93,9 @@ def first(data):
         (lambda d: d["pinned"].update(boundary="tied"), r"pinned: Value error, tie: expected a positive stiffness with boundary: tied"),
         (lambda d: d["pinned"].update(tie=500), r"pinned: Value error, tie: expected a positive stiffness .* got tie 500 with boundary outer"),
         (lambda d: d["pinned"].update(boundary="tied", tie=-1), r"pinned -> tie: Input should be greater than or equal to 0"),
-        (lambda d: first(d).update(protrusion=1.0), r"muscles -> 0 -> linear -> protrusion: unknown field"),
-        (lambda d: next(m for m in d["muscles"] if m["name"] == "incisivus_labii").update(protrusion=-1),
-         r"sphincter -> protrusion: Input should be greater than or equal to 0"),
+        (lambda d: first(d).update(protrusion=25), r"muscles -> 0 -> linear -> protrusion: Input should be less than or equal to 20"),
+        (lambda d: next(m for m in d["muscles"] if m["name"] == "incisivus_labii").update(protrusion=-25),
+         r"sphincter -> protrusion: Input should be greater than or equal to -20"),
     ],
 )
 def test_bad_muscle_files_give_one_line_naming_file_and_muscle(tmp_path, mesh, change, message):
