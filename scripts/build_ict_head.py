@@ -20,8 +20,7 @@ facesim loads in a few milliseconds:
 
 It also writes ``head.muscles.yaml``, the head's muscle file: the muscles, sphincters,
 jaw and eyelids of the Hopper face's file (``meshes/face.muscles.yaml``), whose landmark
-indices are the simulation mesh's vertices, with the jaw's hinge moved to the head's
-temporomandibular joints.
+indices are the simulation mesh's vertices.
 
 ICT's expression shapes are not vendored here: facesim's motion comes from its muscles.
 
@@ -35,7 +34,6 @@ import shutil
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -132,11 +130,6 @@ def build(ict: Path, out: Path) -> None:
           f"{len(shapes['identity_deltas'])} identity modes, {(out / 'head.npz').stat().st_size / 1e6:.1f} MB")
 
 
-#: The temporomandibular joints: a centimetre in front of the tragus, at its height, about
-#: 10 cm apart (the condyles lie inside the head; only the axis through them matters).
-HINGE = [[-5.0, 0.8, 3.5], [5.0, 0.8, 3.5]]
-
-
 def _arcs(x: np.ndarray, loop: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """An opening's upper and lower arcs between its corners (leftmost and rightmost vertices)."""
     first, last = sorted([int(np.argmin(x[loop, 0])), int(np.argmax(x[loop, 0]))])
@@ -211,14 +204,13 @@ def symmetric_weights(measured, mirror_landmark: np.ndarray, mirror_vertex: np.n
 
 
 def write_muscles(ict: Path, out: Path) -> None:
-    """The head's muscle file: the Hopper face's, with the jaw's hinge at the head's
-    temporomandibular joints (its muscles are by landmark, the simulation mesh's vertices)."""
+    """The head's muscle file: the Hopper face's, all by landmark (the simulation mesh's
+    vertices), the jaw's hinge included: the contour points 234 and 454 lie at the height of
+    the head's temporomandibular joints, and the axis through them within 2 mm of the
+    joints' (only the axis matters). Written as the head's coordinates, the hinge did not
+    carry to the Hopper face (its jaw opened about an axis 6 cm off)."""
     text = (ROOT / "meshes" / "face.muscles.yaml").read_text()
     body = text[text.index("units:"):]
-    hinge = yaml.safe_load(body)["jaw"]["hinge"]
-    body = body.replace(f"hinge: {hinge}".replace("'", ""), f"hinge: {HINGE}")
-    if f"hinge: {HINGE}" not in body:
-        raise SystemExit("the Hopper muscle file's jaw hinge line was not found")
     header = (ROOT / "scripts" / "ict_muscles_header.txt").read_text()
     (out / "head.muscles.yaml").write_text(header + body)
     print(f"wrote {out / 'head.muscles.yaml'}")
