@@ -75,7 +75,7 @@ def envelope_keys(start: float, onset: float, apex: float, offset: float, intens
 #: AU26 opens the jaw half way (half its max_angle), AU27 fully. AUs whose muscles the
 #: face does not have are errors.
 ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
-    "AU1": ("inner brow raiser", {"frontalis_medial": 1.0}),
+    "AU1": ("inner brow raiser", {"frontalis_medial": 1.0, "frontalis_galea": 1.0}),
     "AU2": ("outer brow raiser", {"frontalis_lateral": 1.0, "frontalis_outer": 1.0, "frontalis_medial": 0.2}),
     "AU4": ("brow lowerer", {"corrugator_supercilii": 1.0, "procerus": 1.0}),
     "AU5": ("upper lid raiser", {"levator_palpebrae": 1.0}),
