@@ -586,8 +586,8 @@ where a step's time goes.
   (eq. 3.22-3.25, for every vertex of every active muscle's region, every step) done once
   per vertex for the sum of the muscles' 2D forces, a departure from the thesis's
   per-muscle projection that would have to be calibrated again.
-- **10 million vertex-steps per second per core at 28k vertices; `prange` 1.7x.** About
-  1.6 million (the thesis's step, Loop-subdivided face): the per-pair cost above, plus
+- **10 million vertex-steps per second per core at 28k vertices; `prange` 1.7x.** A
+  third of it or less (the scaling table: the thesis's step, Loop-subdivided face): the per-pair cost above, plus
   cache misses once the working set (about 200 bytes per vertex) leaves the L2 cache above
   10k vertices. `prange` was not built: the simulated mesh of every face facesim renders
   is 468 vertices, where a parallel region's start (several µs, about ten per step) costs
@@ -616,12 +616,12 @@ where a step's time goes.
   it: the frame cost above (at 25 frames a second the frames alone take 1.4 s), the
   model's arrays kept in facesim's on-disk cache as the skin weights are, or a
   long-lived render server keeping imports, model and context warm.
-- **50 ms for happy on the head.** In the run above the figure is near the bound
-  either way: the same code measured 40 ms on 2026-11-23, and the Hopper face's
-  unchanged code 27 ms then against 35 ms in this run, on the same kind of machine.
-  Side by side in one process (2026-12-01), the head's tied rim (issue 16) costs 7%
-  over a pinned one: 48.4 against 45.3 ms. The profile above names the muscles'
-  back-projection and the preconditioner as the largest parts of a step.
+- **50 ms for happy on the head.** Met on some machines of this kind and not on others:
+  38 ms on 2026-12-02 (an Intel Xeon), 52 ms on 2026-12-01 (an AMD EPYC), where the
+  Hopper face's same code took 22 and 35 ms. Side by side in one process (2026-12-01),
+  the head's tied rim (issue 16) costs 7% over a pinned one: 48.4 against 45.3 ms. The
+  profile above names the muscles' back-projection and the preconditioner as the
+  largest parts of a step.
 """
 
 
