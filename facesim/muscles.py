@@ -224,8 +224,9 @@ class MuscleSet:
     attachment, a sphincter's centre points), in compressed rows; ring : a sphincter's ring
     vertices (empty for a linear muscle); zone : (M,) radians; falloff : (M, 2) r and r_max
     in muscle lengths or ring radii; force : (M,); protrusion : (M,) the push along the
-    skin's rest normal per unit of its pull (the pucker's pout, the buccinator's press inward); pinned : (p,) int64; tied : the rim's
-    vertices tied to the bones with stiffness ``tie`` (Pinned), (q,) int64.
+    skin's rest normal per unit of its pull (the pucker's pout, the buccinator's press
+    inward); pinned : (p,) int64; tied : the rim's vertices tied to the bones with
+    stiffness ``tie`` (Pinned), (q,) int64.
     """
 
     names: tuple[str, ...]

@@ -18,9 +18,9 @@ acting on top.
   slides over the eyeball about the horizontal axis through its centre, in cylindrical
   coordinates (x, φ, r) about that axis, to a meeting line a tenth of the way up from the
   lower lid, above each lower point (the upper lid does most of a blink) while the lower
-  lid slides a millimetre toward the nose, at a radius outside the eyeball. The upper target always stays
-  above its lower partner, ``LID_GAP`` apart when closed, so the lids never pass through
-  each other. The skin around the opening, out to ``reach`` eye widths, follows with a
+  lid slides a millimetre toward the nose, at a radius outside the eyeball. The upper
+  target always stays above its lower partner, ``LID_GAP`` apart when closed, so the
+  lids never pass through each other. The skin around the opening, out to ``reach`` eye widths, follows with a
   harmonic share of the contour's motion. The levator palpebrae superioris (an eyelid's
   ``levator`` control) turns the upper contour up over the eyeball instead, by
   ``levator_angle`` at its middle and less toward the corners (sin π s along it, s from
