@@ -19,6 +19,14 @@ them, one line per term.
                              where the muscles' ends are as the bones move
 - ``_contacts``              lips and lids kept apart (a position projection after a step)
 
+The springs, the edge repulsion, the bending and each muscle's region run on every core
+for a large mesh (``prange``, facesim.config.PARALLEL_FROM): a link term scatters by
+``CHUNKS`` fixed slices of its links into buffers of their own, summed per vertex in slice
+order (``_gather_parts``), so the bits do not depend on the thread count. Inside a
+parallel loop every array is written through a local name: Numba 0.68 drops writes made
+there through a tuple's field (``forces.force[i] = ...``; measured), and takes no tuple
+nested in another (so ``Forces`` is flat).
+
 A term adds, at the predicted positions X* (eq. 3.14), its force F_i and, where its force
 depends on X_i, the scalar stiffness K_i = Σ ∂F_i/∂X_i along the spring (the Σ g + Σ h of
 eq. 3.19; negative for a stretched spring), and damping terms their C_i = -∂F_i/∂V_i.
@@ -30,9 +38,9 @@ from collections import namedtuple
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-from .config import LENGTH_EPS, NEGLIGIBLE_DELTA, NUMBA_OPTIONS
+from .config import CHUNKS, LENGTH_EPS, NEGLIGIBLE_DELTA, NUMBA_OPTIONS, PARALLEL_OPTIONS
 
 #: The model's arrays and constants, as the kernels read them (facesim.model.Model.arrays).
 #: Shapes: n vertices, t triangles, s springs, r repulsion pairs, M muscles; the jaw and
@@ -56,28 +64,43 @@ State = namedtuple("State", ["x", "v"])
 #: the drive holding it there; the muscles' ends ``origin`` and ``insertion_point`` (M, 3)
 #: in the frame they act in, from the same bones (``_rig_control``).
 Control = namedtuple("Control", ["activation", "target", "hold", "origin", "insertion_point"])
-#: The whole stiffness K = -∂F/∂X that an implicit solver needs, where the K_i above keep
-#: one number per vertex: link l joins the vertices ``node[l]`` (4) with weights
-#: ``weight[l]``, its extension u = Σ_k w_k X_node[l, k] (a spring: X_i - X_j; edge
-#: repulsion: X_i - P_k; a bending hinge: its four vertices' stencil), and adds
-#: w_p w_q B to the 3x3 block (p, q) of K, with
-#: B = along a aᵀ + across (I - a aᵀ) for its unit ``axis`` a; ``diagonal`` (n,) adds an
-#: isotropic stiffness per vertex (the hypodermis). B is positive semi-definite: along is
-#: the derivative of the tension, across the tension over the length, and 0 when
-#: compressed (the usual clamp: a compressed spring's sideways instability is left out);
-#: a hinge's B is isotropic (along = across).
-Links = namedtuple("Links", ["node", "weight", "axis", "along", "across", "diagonal"])
 #: What the force terms add into: ``force`` (n, 3), ``stiffness`` (n,) the K_i and
-#: ``damping`` (n,) the C_i of the module docstring, and the ``links`` of K.
-Forces = namedtuple("Forces", ["force", "stiffness", "damping", "links"])
+#: ``damping`` (n,) the C_i of the module docstring; and the links of the whole stiffness
+#: K = -∂F/∂X that an implicit solver needs, where the K_i keep one number per vertex:
+#: link l joins the vertices ``node[l]`` (4) with weights ``weight[l]``, its extension
+#: u = Σ_k w_k X_node[l, k] (a spring: X_i - X_j; edge repulsion: X_i - P_k; a bending
+#: hinge: its four vertices' stencil), and adds w_p w_q B to the 3x3 block (p, q) of K,
+#: with B = along a aᵀ + across (I - a aᵀ) for its unit ``axis`` a; ``diagonal`` (n,) adds
+#: an isotropic stiffness per vertex (the hypodermis). B is positive semi-definite: along
+#: is the derivative of the tension, across the tension over the length, and 0 when
+#: compressed (the usual clamp: a compressed spring's sideways instability is left out);
+#: a hinge's B is isotropic (along = across). The link terms scatter into ``part``
+#: (CHUNKS, n, 3) and ``part_stiffness`` (CHUNKS, n), one slice of the links each, summed
+#: per vertex and zeroed after each term (``_gather_parts``). One flat tuple: Numba's parallel loops take no tuple nested in another.
+Forces = namedtuple("Forces", ["force", "stiffness", "damping", "node", "weight", "axis", "along", "across", "diagonal",
+                               "part", "part_stiffness"])
 #: Scratch arrays of the muscle terms: the points in the muscles' frame (n, 3), the flood
-#: fill's marks, stack, region and δ (n,), and the mark of the latest fill (1,).
-Workspace = namedtuple("Workspace", ["frame", "attached", "visited", "stack", "region", "delta", "stamp"])
+#: fill's marks, stack, region and δ (n,), and the mark of the latest fill (1,). Where the
+#: regions are evaluated where the bones hold the skin (``attached_regions``), they change
+#: only when the bones move, and each muscle's is kept between steps: ``bones`` (n, 3) the
+#: targets they were found at (``known`` (1,): 0 until the first), muscle m's region the
+#: ``region_count[m]`` entries of ``kept_vertex`` and ``kept_delta`` from
+#: ``region_first[m]`` (a count of -1: not found since the bones last moved), ``kept`` (1,)
+#: the entries in use. A workspace serves one model.
+Workspace = namedtuple("Workspace", ["frame", "attached", "visited", "stack", "region", "delta", "stamp", "bones", "known",
+                                     "region_first", "region_count", "kept_vertex", "kept_delta", "kept"])
+#: Room for the kept regions, in vertices per mesh vertex: a region that does not fit is
+#: found again at every step, as when the bones move.
+KEPT_REGIONS = 8
 
 
-def workspace(n: int) -> Workspace:
+def workspace(model: ModelArrays) -> Workspace:
+    n, muscles = model.rest_position.shape[0], model.muscle_kind.shape[0]
+    room = KEPT_REGIONS * n
     return Workspace(np.empty((n, 3)), np.empty((n, 3)), np.zeros(n, dtype=np.int64), np.empty(n, dtype=np.int64),
-                     np.empty(n, dtype=np.int64), np.empty(n), np.zeros(1, dtype=np.int64))
+                     np.empty(n, dtype=np.int64), np.empty(n), np.zeros(1, dtype=np.int64), np.empty((n, 3)),
+                     np.zeros(1, dtype=np.int64), np.zeros(muscles, dtype=np.int64), np.full(muscles, -1, dtype=np.int64),
+                     np.empty(room, dtype=np.int64), np.empty(room), np.zeros(1, dtype=np.int64))
 
 
 def forces(model: ModelArrays) -> Forces:
@@ -85,9 +108,9 @@ def forces(model: ModelArrays) -> Forces:
     then one per bending hinge."""
     n = model.rest_position.shape[0]
     count = model.spring_indices.shape[0] + model.repulsion_vertex.shape[0] + model.hinge.shape[0]
-    links = Links(np.zeros((count, 4), dtype=np.int64), np.zeros((count, 4)), np.zeros((count, 3)), np.zeros(count),
-                  np.zeros(count), np.zeros(n))
-    return Forces(np.zeros((n, 3)), np.zeros(n), np.zeros(n), links)
+    return Forces(np.zeros((n, 3)), np.zeros(n), np.zeros(n), np.zeros((count, 4), dtype=np.int64), np.zeros((count, 4)),
+                  np.zeros((count, 3)), np.zeros(count), np.zeros(count), np.zeros(n), np.zeros((CHUNKS, n, 3)),
+                  np.zeros((CHUNKS, n)))
 
 
 def control(model: ModelArrays, activation: np.ndarray) -> Control:
@@ -152,35 +175,35 @@ def _nonlinear_coefficient(length, rest, k0, exponent, unit):
 
 
 @njit(**NUMBA_OPTIONS)
-def _set_link(links, l, i, j, k, wi, wj, wk, dx, dy, dz, length, g, along):
-    """Link l of K (``Links``): nodes i, j, k with weights (the fourth node unused),
+def _set_link(forces, l, i, j, k, wi, wj, wk, dx, dy, dz, length, g, along):
+    """Link l of K (``Forces``): nodes i, j, k with weights (the fourth node unused),
     axis (dx, dy, dz) / length, the tension's derivative ``along`` and -g (the tension
     over the length, eq. 3.17's g with its sign turned) across, clamped at 0."""
-    links.node[l, 0] = i
-    links.node[l, 1] = j
-    links.node[l, 2] = k
-    links.node[l, 3] = k
-    links.weight[l, 0] = wi
-    links.weight[l, 1] = wj
-    links.weight[l, 2] = wk
-    links.weight[l, 3] = 0.0
+    forces.node[l, 0] = i
+    forces.node[l, 1] = j
+    forces.node[l, 2] = k
+    forces.node[l, 3] = k
+    forces.weight[l, 0] = wi
+    forces.weight[l, 1] = wj
+    forces.weight[l, 2] = wk
+    forces.weight[l, 3] = 0.0
     inverse = 1.0 / max(length, LENGTH_EPS)
-    links.axis[l, 0] = dx * inverse
-    links.axis[l, 1] = dy * inverse
-    links.axis[l, 2] = dz * inverse
-    links.along[l] = along
-    links.across[l] = max(-g, 0.0)
+    forces.axis[l, 0] = dx * inverse
+    forces.axis[l, 1] = dy * inverse
+    forces.axis[l, 2] = dz * inverse
+    forces.along[l] = along
+    forces.across[l] = max(-g, 0.0)
 
 
 @njit(**NUMBA_OPTIONS)
-def _link_extension(links, l, p):
-    """Σ_k w_k p_node[l, k], link l's extension (``Links``) in the vectors ``p`` (n, 3)."""
+def _link_extension(forces, l, p):
+    """Σ_k w_k p_node[l, k], link l's extension (``Forces``) in the vectors ``p`` (n, 3)."""
     ux = 0.0
     uy = 0.0
     uz = 0.0
     for k in range(4):
-        w = links.weight[l, k]
-        node = links.node[l, k]
+        w = forces.weight[l, k]
+        node = forces.node[l, k]
         ux += w * p[node, 0]
         uy += w * p[node, 1]
         uz += w * p[node, 2]
@@ -188,39 +211,65 @@ def _link_extension(links, l, p):
 
 
 @njit(**NUMBA_OPTIONS)
-def _link_spread(links, l, scale, bx, by, bz, out):
+def _link_spread(forces, l, scale, bx, by, bz, out):
     """out[node[l, k]] += scale w_k b for link l's nodes: a vector b acting on its
     extension, carried back to the vertices (the transpose of ``_link_extension``)."""
     for k in range(4):
-        w = scale * links.weight[l, k]
-        node = links.node[l, k]
+        w = scale * forces.weight[l, k]
+        node = forces.node[l, k]
         out[node, 0] += w * bx
         out[node, 1] += w * by
         out[node, 2] += w * bz
 
 
 @njit(**NUMBA_OPTIONS)
+def _chunk(c, count):
+    """Slice c of ``CHUNKS`` of range(count): its first and its end."""
+    return c * count // CHUNKS, (c + 1) * count // CHUNKS
+
+
+@njit(**PARALLEL_OPTIONS)
+def _gather_parts(forces):
+    """Add the link terms' slices into ``force`` and ``stiffness`` in slice order, and
+    zero them: the same sums on any number of threads."""
+    force, stiffness, part, part_stiffness = forces.force, forces.stiffness, forces.part, forces.part_stiffness
+    for i in prange(force.shape[0]):
+        for c in range(CHUNKS):
+            for d in range(3):
+                force[i, d] += part[c, i, d]
+                part[c, i, d] = 0.0
+            stiffness[i] += part_stiffness[c, i]
+            part_stiffness[c, i] = 0.0
+
+
+@njit(**PARALLEL_OPTIONS)
 def _spring_forces(model, xp, forces):
     """Springs on the mesh edges, eq. 3.6, at the predicted positions: F_i = g (X_i* - X_j*),
-    its g into both ends' stiffness (eq. 3.17), and spring s as link s of K."""
-    for s in range(model.spring_indices.shape[0]):
-        i = model.spring_indices[s, 0]
-        j = model.spring_indices[s, 1]
-        dx = xp[i, 0] - xp[j, 0]
-        dy = xp[i, 1] - xp[j, 1]
-        dz = xp[i, 2] - xp[j, 2]
-        length = math.sqrt(dx * dx + dy * dy + dz * dz)
-        g, along = _nonlinear_coefficient(length, model.spring_rest_length[s], model.stiffness, model.nonlinearity,
-                                          model.length_unit)
-        forces.stiffness[i] += g
-        forces.stiffness[j] += g
-        forces.force[i, 0] += g * dx
-        forces.force[i, 1] += g * dy
-        forces.force[i, 2] += g * dz
-        forces.force[j, 0] -= g * dx
-        forces.force[j, 1] -= g * dy
-        forces.force[j, 2] -= g * dz
-        _set_link(forces.links, s, i, j, j, 1.0, -1.0, 0.0, dx, dy, dz, length, g, along)
+    its g into both ends' stiffness (eq. 3.17), and, for the implicit step, spring s as
+    link s of K."""
+    for c in prange(CHUNKS):
+        force, stiffness = forces.part[c], forces.part_stiffness[c]
+        first, end = _chunk(c, model.spring_indices.shape[0])
+        for s in range(first, end):
+            i = model.spring_indices[s, 0]
+            j = model.spring_indices[s, 1]
+            dx = xp[i, 0] - xp[j, 0]
+            dy = xp[i, 1] - xp[j, 1]
+            dz = xp[i, 2] - xp[j, 2]
+            length = math.sqrt(dx * dx + dy * dy + dz * dz)
+            g, along = _nonlinear_coefficient(length, model.spring_rest_length[s], model.stiffness, model.nonlinearity,
+                                              model.length_unit)
+            stiffness[i] += g
+            stiffness[j] += g
+            force[i, 0] += g * dx
+            force[i, 1] += g * dy
+            force[i, 2] += g * dz
+            force[j, 0] -= g * dx
+            force[j, 1] -= g * dy
+            force[j, 2] -= g * dz
+            if model.implicit:
+                _set_link(forces, s, i, j, j, 1.0, -1.0, 0.0, dx, dy, dz, length, g, along)
+    _gather_parts(forces)
 
 
 @njit(**NUMBA_OPTIONS)
@@ -232,12 +281,13 @@ def _tissue_forces(model, xp, control, forces):
     muscle pull it wrinkles and creeps without ever settling, and these springs give
     every mode a restoring force. ``hold`` holds the skin over the
     mandible and the lid contours to their targets while the jaw and lids move."""
+    force, stiffness, diagonal = forces.force, forces.stiffness, forces.diagonal
     for i in range(xp.shape[0]):
         k = model.tissue + model.tie[i] + control.hold[i]
-        forces.stiffness[i] -= k
-        forces.links.diagonal[i] += k
+        stiffness[i] -= k
+        diagonal[i] += k
         for d in range(3):
-            forces.force[i, d] -= k * (xp[i, d] - control.target[i, d])
+            force[i, d] -= k * (xp[i, d] - control.target[i, d])
 
 
 @njit(**NUMBA_OPTIONS)
@@ -256,7 +306,7 @@ def _foot_on_edge(xp, i, a, b, out):
     return t
 
 
-@njit(**NUMBA_OPTIONS)
+@njit(**PARALLEL_OPTIONS)
 def _edge_repulsion_forces(model, xp, forces):
     """Edge repulsion, eq. 3.7: each vertex is held at its rest altitude above the
     opposite edge of each of its triangles.
@@ -269,36 +319,40 @@ def _edge_repulsion_forces(model, xp, forces):
     """
     if not model.edge_repulsion:
         return
-    foot = np.empty(3)
     springs = model.spring_indices.shape[0]
-    for r in range(model.repulsion_vertex.shape[0]):
-        i = model.repulsion_vertex[r]
-        a = model.repulsion_edge[r, 0]
-        b = model.repulsion_edge[r, 1]
-        t = _foot_on_edge(xp, i, a, b, foot)
-        dx = xp[i, 0] - foot[0]
-        dy = xp[i, 1] - foot[1]
-        dz = xp[i, 2] - foot[2]
-        distance = math.sqrt(dx * dx + dy * dy + dz * dz)
-        h, along = _nonlinear_coefficient(distance, model.repulsion_rest_distance[r], model.stiffness,
-                                          model.repulsion_nonlinearity, model.length_unit)
-        # link u = X_i - P_k = X_i - (1 - t) X_a - t X_b (the foot's parameter t held)
-        _set_link(forces.links, springs + r, i, a, b, 1.0, t - 1.0, -t, dx, dy, dz, distance, h, along)
-        forces.stiffness[i] += h
-        forces.force[i, 0] += h * dx
-        forces.force[i, 1] += h * dy
-        forces.force[i, 2] += h * dz
-        wa = -(1.0 - t) * h
-        wb = -t * h
-        forces.force[a, 0] += wa * dx
-        forces.force[a, 1] += wa * dy
-        forces.force[a, 2] += wa * dz
-        forces.force[b, 0] += wb * dx
-        forces.force[b, 1] += wb * dy
-        forces.force[b, 2] += wb * dz
+    for c in prange(CHUNKS):
+        force, stiffness = forces.part[c], forces.part_stiffness[c]
+        foot = np.empty(3)
+        first, end = _chunk(c, model.repulsion_vertex.shape[0])
+        for r in range(first, end):
+            i = model.repulsion_vertex[r]
+            a = model.repulsion_edge[r, 0]
+            b = model.repulsion_edge[r, 1]
+            t = _foot_on_edge(xp, i, a, b, foot)
+            dx = xp[i, 0] - foot[0]
+            dy = xp[i, 1] - foot[1]
+            dz = xp[i, 2] - foot[2]
+            distance = math.sqrt(dx * dx + dy * dy + dz * dz)
+            h, along = _nonlinear_coefficient(distance, model.repulsion_rest_distance[r], model.stiffness,
+                                              model.repulsion_nonlinearity, model.length_unit)
+            if model.implicit:  # link u = X_i - P_k = X_i - (1 - t) X_a - t X_b (the foot's parameter t held)
+                _set_link(forces, springs + r, i, a, b, 1.0, t - 1.0, -t, dx, dy, dz, distance, h, along)
+            stiffness[i] += h
+            force[i, 0] += h * dx
+            force[i, 1] += h * dy
+            force[i, 2] += h * dz
+            wa = -(1.0 - t) * h
+            wb = -t * h
+            force[a, 0] += wa * dx
+            force[a, 1] += wa * dy
+            force[a, 2] += wa * dz
+            force[b, 0] += wb * dx
+            force[b, 1] += wb * dy
+            force[b, 2] += wb * dz
+    _gather_parts(forces)
 
 
-@njit(**NUMBA_OPTIONS)
+@njit(**PARALLEL_OPTIONS)
 def _bending_forces(model, xp, control, forces):
     """Bending: each interior edge's hinge (its two triangles' four vertices) resists a
     change of the skin's curvature, with the quadratic energy of Bergou, Wardetzky, Harmon,
@@ -320,38 +374,43 @@ def _bending_forces(model, xp, control, forces):
         return
     offset = model.spring_indices.shape[0] + model.repulsion_vertex.shape[0]
     kb = model.bending
-    links = forces.links
-    for e in range(model.hinge.shape[0]):
-        l = offset + e
-        # the bend w · U summed over the differences U = X - target, not as w · X - w · target
-        # (``_link_extension`` twice): the weights reach 100 and the positions 10 cm, and the
-        # two sums would cancel to 1e-9
-        bx = 0.0
-        by = 0.0
-        bz = 0.0
-        for k in range(4):
-            node = model.hinge[e, k]
-            w = model.hinge_weight[e, k]
-            forces.stiffness[node] -= kb * w * w
-            links.node[l, k] = node
-            links.weight[l, k] = w
-            bx += w * (xp[node, 0] - control.target[node, 0])
-            by += w * (xp[node, 1] - control.target[node, 1])
-            bz += w * (xp[node, 2] - control.target[node, 2])
-        links.axis[l, 0] = 1.0
-        links.axis[l, 1] = 0.0
-        links.axis[l, 2] = 0.0
-        links.along[l] = kb
-        links.across[l] = kb
-        _link_spread(links, l, -kb, bx, by, bz, forces.force)  # F = -k_b w (w · U)
+    node_of, weight_of, axis, along, across = forces.node, forces.weight, forces.axis, forces.along, forces.across
+    for c in prange(CHUNKS):
+        force, stiffness = forces.part[c], forces.part_stiffness[c]
+        first, end = _chunk(c, model.hinge.shape[0])
+        for e in range(first, end):
+            l = offset + e
+            # the bend w · U summed over the differences U = X - target, not as w · X - w · target
+            # (``_link_extension`` twice): the weights reach 100 and the positions 10 cm, and the
+            # two sums would cancel to 1e-9
+            bx = 0.0
+            by = 0.0
+            bz = 0.0
+            for k in range(4):
+                node = model.hinge[e, k]
+                w = model.hinge_weight[e, k]
+                stiffness[node] -= kb * w * w
+                node_of[l, k] = node
+                weight_of[l, k] = w
+                bx += w * (xp[node, 0] - control.target[node, 0])
+                by += w * (xp[node, 1] - control.target[node, 1])
+                bz += w * (xp[node, 2] - control.target[node, 2])
+            axis[l, 0] = 1.0
+            axis[l, 1] = 0.0
+            axis[l, 2] = 0.0
+            along[l] = kb
+            across[l] = kb
+            _link_spread(forces, l, -kb, bx, by, bz, force)  # F = -k_b w (w · U)
+    _gather_parts(forces)
 
 
 @njit(**NUMBA_OPTIONS)
 def _damping_forces(model, forces):
     """Viscous damping, eq. 3.10: F = -c V, left to the solver as C_i = c, which it takes
     at the new velocity (implicitly, as eq. 3.19 does)."""
-    for i in range(forces.damping.shape[0]):
-        forces.damping[i] += model.damping
+    damping = forces.damping
+    for i in range(damping.shape[0]):
+        damping[i] += model.damping
 
 
 @njit(**NUMBA_OPTIONS)
@@ -540,12 +599,12 @@ def _region_of_influence(model, m, origin, insertion_point, points, work):
     return count
 
 
-@njit(**NUMBA_OPTIONS)
+@njit(**PARALLEL_OPTIONS)
 def _muscle_frame(model, xp, frame):
     """The points the muscles act in: the 2D projection of eq. 3.21 with u scaled to arc
     length, u = R atan2(x - cx, z - cz), v = y (cm), written as 3D points (u, v, 0) so the
     falloff code serves both frames; or the 3D positions."""
-    for i in range(xp.shape[0]):
+    for i in prange(xp.shape[0]):
         _frame_point(xp, i, model.axis_x, model.axis_z, model.radius, model.uv_projection, frame[i])
 
 
@@ -572,35 +631,95 @@ def _muscle_forces(model, xp, control, work, forces):
     muscle over the teeth presses the skin onto them (the buccinator drawing the lip
     corners back into the cheek, AU14). Not in the thesis (p = 0 is its model), where a
     muscle only pulls in its own plane and cannot move the skin off the face's surface.
-    The push keeps its direction, so it adds no stiffness."""
+    The push keeps its direction, so it adds no stiffness.
+
+    Attached regions change only when the bones move, so each muscle's is kept in the
+    workspace until they do (``Workspace``)."""
     _muscle_frame(model, xp, work.frame)
     frame = work.frame
     if model.attached_regions:
-        _muscle_frame(model, control.target, work.attached)
+        _bones_moved(model, control.target, work)
     points = work.attached if model.attached_regions else frame
-    f3 = np.empty(3)
     for m in range(model.muscle_kind.shape[0]):
         a_m = control.activation[m]
         if a_m == 0.0:
             continue
-        count = _region_of_influence(model, m, control.origin, control.insertion_point, points, work)
-        for k in range(count):
-            i = work.region[k]
+        if model.attached_regions and work.region_count[m] >= 0:
+            first, count = work.region_first[m], work.region_count[m]
+            region, delta = work.kept_vertex[first:first + count], work.kept_delta[first:first + count]
+        else:
+            count = _region_of_influence(model, m, control.origin, control.insertion_point, points, work)
+            region, delta = work.region[:count], work.delta[:count]
+            if model.attached_regions:
+                _keep_region(m, count, work)
+        _pull_region(model, m, a_m, region, delta, count, frame, xp, control, forces.force)
+
+
+@njit(**PARALLEL_OPTIONS)
+def _pull_region(model, m, a_m, region, delta, count, frame, xp, control, force):
+    """Eq. 3.1 at the ``count`` vertices of muscle m's region (``region``, with their δ),
+    at activation a_m, back-projected (eq. 3.22-3.25) when the muscles act in the 2D
+    projection, and the muscle's push along the rest normal (``_muscle_forces``). Each
+    vertex is in a region once, so the slices write apart."""
+    for c in prange(CHUNKS):
+        f3 = np.empty(3)
+        first, end = _chunk(c, count)
+        for k in range(first, end):
+            i = region[k]
             if model.pinned[i]:
                 continue
             length = 0.0
             for d in range(3):
                 f3[d] = control.origin[m, d] - frame[i, d]
                 length += f3[d] ** 2
-            scale = a_m * model.muscle_force[m] * work.delta[k] / max(math.sqrt(length), LENGTH_EPS)  # eq. 3.1
+            scale = a_m * model.muscle_force[m] * delta[k] / max(math.sqrt(length), LENGTH_EPS)  # eq. 3.1
             if model.uv_projection:
                 _back_project(model, i, scale * f3[0], scale * f3[1], frame, xp, f3)
             else:
                 for d in range(3):
                     f3[d] *= scale
-            push = a_m * model.muscle_force[m] * work.delta[k] * model.muscle_protrusion[m]
+            push = a_m * model.muscle_force[m] * delta[k] * model.muscle_protrusion[m]
             for d in range(3):
-                forces.force[i, d] += f3[d] + push * model.rest_vertex_normal[i, d]
+                force[i, d] += f3[d] + push * model.rest_vertex_normal[i, d]
+
+
+@njit(**NUMBA_OPTIONS)
+def _bones_moved(model, target, work):
+    """Whether the bones hold the skin elsewhere than where the kept regions were found
+    (``Workspace``); if so, forget the regions and put the points where the skin is
+    attached into the muscles' frame (``work.attached``) for the flood fills to come."""
+    same = work.known[0] == 1
+    if same:
+        for i in range(target.shape[0]):
+            for d in range(3):
+                if target[i, d] != work.bones[i, d]:
+                    same = False
+                    break
+            if not same:
+                break
+    if same:
+        return False
+    work.bones[:] = target
+    work.known[0] = 1
+    work.region_count[:] = -1
+    work.kept[0] = 0
+    _muscle_frame(model, target, work.attached)
+    return True
+
+
+@njit(**NUMBA_OPTIONS)
+def _keep_region(m, count, work):
+    """Keep muscle m's region, just found in ``work.region`` and ``work.delta``, until the
+    bones move (``Workspace``), if there is room."""
+    first = work.kept[0]
+    if first + count > work.kept_vertex.shape[0]:
+        return
+    for k in range(count):
+        work.kept_vertex[first + k] = work.region[k]
+        work.kept_delta[first + k] = work.delta[k]
+    work.region_first[m] = first
+    work.region_count[m] = count
+    work.kept[0] = first + count
 
 
 @njit(**NUMBA_OPTIONS)
@@ -627,12 +746,13 @@ def _rig_control(model, control):
     ends, from where the bones hold them (``_muscle_geometry``)."""
     activation = control.activation
     theta = model.jaw_max * activation[model.jaw_column] if model.jaw_column >= 0 else 0.0
+    target, hold = control.target, control.hold
     for i in range(model.rest_position.shape[0]):
         px, py, pz = model.rest_position[i, 0], model.rest_position[i, 1], model.rest_position[i, 2]
         column = model.drive_column[i]
         a = activation[model.lid_raise_column[i]] if model.lid_raise_column[i] >= 0 else 0.0
         driving = max(activation[column], a) if column >= 0 else 0.0
-        control.hold[i] = model.drive * model.drive_weight[i] * min(1.0, 10.0 * driving)
+        hold[i] = model.drive * model.drive_weight[i] * min(1.0, 10.0 * driving)
         if model.lid_column[i] >= 0:
             c = activation[model.lid_column[i]]
             a *= 1.0 - c  # the levator lets go as the lid closes: a blink closes a raised lid
@@ -647,9 +767,9 @@ def _rig_control(model, control):
         if theta != 0.0 and model.jaw_weight[i] > 0.0:
             h, a = model.jaw_hinge, model.jaw_axis
             px, py, pz = _rotate(px, py, pz, h[0], h[1], h[2], a[0], a[1], a[2], model.jaw_weight[i] * theta)
-        control.target[i, 0] = px
-        control.target[i, 1] = py
-        control.target[i, 2] = pz
+        target[i, 0] = px
+        target[i, 1] = py
+        target[i, 2] = pz
     _muscle_geometry(model, control.target, control.origin, control.insertion_point)
 
 

@@ -15,7 +15,7 @@ def muscle_regions(model) -> list[np.ndarray]:
     """Each muscle's region of influence at rest (the flood fill of section 3.3)."""
     from . import kernels
 
-    work = kernels.workspace(model.vertex_count)
+    work = kernels.workspace(model.arrays)
     rest = kernels.control(model.arrays, np.zeros(len(model.muscles.names)))
     kernels._muscle_frame(model.arrays, model.rest_position, work.frame)
     regions = []

@@ -14,9 +14,11 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from . import kernels, solver
+from .config import PARALLEL_FROM
 from .errors import SimulationError
 from .mesh import FaceMesh, load_face
 from .model import Material, Model, build_model
@@ -140,9 +142,12 @@ def run(
     dt: float,
     stop_on_inversion: bool = True,
     source: str = "simulation",
+    threads: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Simulate ``activations`` (frames, M) from rest. Returns positions, kinetic energy,
-    inverted-triangle counts and smallest relative areas per frame."""
+    inverted-triangle counts and smallest relative areas per frame. The kernels' parallel
+    loops run on ``threads`` threads: by default every core Numba has for a mesh of at
+    least ``PARALLEL_FROM`` vertices, else one (facesim.config)."""
     frames = len(activations)
     if activations.ndim != 2 or activations.shape[1] != len(model.muscles.names):
         raise ValueError(f"activations must be (frames, {len(model.muscles.names)}), one column per muscle and control")
@@ -153,17 +158,24 @@ def run(
     energy_limit = 0.5 * model.material.mass * n * frame_speed**2
     table = np.ascontiguousarray(activations, dtype=np.float64)
     control = kernels.control(model.arrays, np.zeros(table.shape[1]))
-    work, forces = kernels.workspace(n), kernels.forces(model.arrays)
+    work, forces = kernels.workspace(model.arrays), kernels.forces(model.arrays)
     factor = model.preconditioner(float(dt) / model.material.substeps)
     piece = max(1, int(STEPS_PER_CALL / (model.material.substeps * n)))
     status, frame, element = kernels.OK, -1, -1
-    for start in range(0, frames, piece):  # Python between pieces: Ctrl-C and SIGTERM act within about 0.2 s
-        status, frame, element = solver._simulate(
-            model.arrays, table, start, min(frames, start + piece), float(dt), int(model.material.substeps), energy_limit,
-            stop_on_inversion, state, control, work, forces, factor, out,
-        )
-        if status != kernels.OK:
-            break
+    if threads is None:
+        threads = numba.config.NUMBA_NUM_THREADS if n >= PARALLEL_FROM else 1
+    previous = numba.get_num_threads()
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    try:
+        for start in range(0, frames, piece):  # Python between pieces: Ctrl-C and SIGTERM act within about 0.2 s
+            status, frame, element = solver._simulate(
+                model.arrays, table, start, min(frames, start + piece), float(dt), int(model.material.substeps),
+                energy_limit, stop_on_inversion, state, control, work, forces, factor, out,
+            )
+            if status != kernels.OK:
+                break
+    finally:
+        numba.set_num_threads(previous)
     positions, energy, inverted, smallest = out
     if status == kernels.NOT_FINITE:
         raise SimulationError(f"{source}: simulation diverged at frame {frame}: vertex {element} is not finite", frame)
@@ -210,8 +222,8 @@ def muscle_forces(model: Model, positions: np.ndarray, activation: np.ndarray) -
     ``activation`` (one row of the activation table: muscles, then jaw and eyelids), with
     the muscles' ends where the jaw and lids hold them, as in the step: what
     ``--show-muscles`` draws, as the thesis's figure 3.10."""
-    n = model.vertex_count
     x = np.ascontiguousarray(positions, dtype=np.float64)
     forces = kernels.forces(model.arrays)
-    kernels._muscle_forces(model.arrays, x, kernels.control(model.arrays, activation), kernels.workspace(n), forces)
+    control = kernels.control(model.arrays, activation)
+    kernels._muscle_forces(model.arrays, x, control, kernels.workspace(model.arrays), forces)
     return forces.force

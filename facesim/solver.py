@@ -17,7 +17,7 @@ state and the frame's control, and advances the state in place:
 
 - ``_implicit_step`` (the default): the same prediction and terms, then the linearised
   backward-Euler step with the whole stiffness K = -∂F/∂X that the terms give as links
-  (kernels.Links: 3x3 blocks between neighbours, where the thesis keeps one number per
+  (kernels.Forces: 3x3 blocks between neighbours, where the thesis keeps one number per
   vertex),
 
       (m + Δt C + Δt² K) V' = m V + Δt F + Δt² K V,
@@ -73,7 +73,7 @@ def _forces(model, xp, control, work, forces):
     forces.force[:] = 0.0
     forces.stiffness[:] = 0.0
     forces.damping[:] = 0.0
-    forces.links.diagonal[:] = 0.0
+    forces.diagonal[:] = 0.0
     kernels._spring_forces(model, xp, forces)  # eq. 3.6
     kernels._edge_repulsion_forces(model, xp, forces)  # eq. 3.7
     kernels._bending_forces(model, xp, control, forces)  # Bergou et al. 2006, on the displacement
@@ -115,27 +115,27 @@ def _quasi_implicit_step(model, state, control, h, xp, work, forces):
 
 
 @njit(**NUMBA_OPTIONS)
-def _stiffness_product(links, p, out):
-    """out = K p for the stiffness the terms wrote (kernels.Links): the isotropic diagonal,
+def _stiffness_product(forces, p, out):
+    """out = K p for the stiffness the terms wrote (kernels.Forces): the isotropic diagonal,
     then each link's blocks w_p w_q B applied to its extension u = Σ w_k p_k."""
     for i in range(p.shape[0]):
         for d in range(3):
-            out[i, d] = links.diagonal[i] * p[i, d]
-    for l in range(links.along.shape[0]):
-        ux, uy, uz = kernels._link_extension(links, l, p)
-        ax, ay, az = links.axis[l, 0], links.axis[l, 1], links.axis[l, 2]
-        across = links.across[l]
-        projection = (links.along[l] - across) * (ax * ux + ay * uy + az * uz)
+            out[i, d] = forces.diagonal[i] * p[i, d]
+    for l in range(forces.along.shape[0]):
+        ux, uy, uz = kernels._link_extension(forces, l, p)
+        ax, ay, az = forces.axis[l, 0], forces.axis[l, 1], forces.axis[l, 2]
+        across = forces.across[l]
+        projection = (forces.along[l] - across) * (ax * ux + ay * uy + az * uz)
         bx = across * ux + projection * ax
         by = across * uy + projection * ay
         bz = across * uz + projection * az
-        kernels._link_spread(links, l, 1.0, bx, by, bz, out)
+        kernels._link_spread(forces, l, 1.0, bx, by, bz, out)
 
 
 @njit(**NUMBA_OPTIONS)
 def _system_product(model, forces, h, p, out):
     """out = A p with A = m + Δt C + Δt² K, zero at the pinned vertices."""
-    _stiffness_product(forces.links, p, out)
+    _stiffness_product(forces, p, out)
     for i in range(p.shape[0]):
         a = model.mass + h * forces.damping[i]
         for d in range(3):
@@ -143,53 +143,51 @@ def _system_product(model, forces, h, p, out):
 
 
 @njit(**NUMBA_OPTIONS)
-def _link_block(links, l, d, e):
-    """Entry (d, e) of link l's 3x3 block B = along a aᵀ + across (I - a aᵀ) (kernels.Links)."""
-    across = links.across[l]
-    return (links.along[l] - across) * links.axis[l, d] * links.axis[l, e] + (across if d == e else 0.0)
+def _link_block(forces, l, d, e):
+    """Entry (d, e) of link l's 3x3 block B = along a aᵀ + across (I - a aᵀ) (kernels.Forces)."""
+    across = forces.across[l]
+    return (forces.along[l] - across) * forces.axis[l, d] * forces.axis[l, e] + (across if d == e else 0.0)
 
 
 @njit(**NUMBA_OPTIONS)
 def _jacobi(model, forces, h, out):
     """The diagonal of A = m + Δt C + Δt² K, per coordinate."""
-    links = forces.links
     for i in range(out.shape[0]):
         for d in range(3):
-            out[i, d] = model.mass + h * forces.damping[i] + h * h * links.diagonal[i]
-    for l in range(links.along.shape[0]):
+            out[i, d] = model.mass + h * forces.damping[i] + h * h * forces.diagonal[i]
+    for l in range(forces.along.shape[0]):
         for k in range(4):
-            w2 = h * h * links.weight[l, k] * links.weight[l, k]
-            node = links.node[l, k]
+            w2 = h * h * forces.weight[l, k] * forces.weight[l, k]
+            node = forces.node[l, k]
             for d in range(3):
-                out[node, d] += w2 * _link_block(links, l, d, d)
+                out[node, d] += w2 * _link_block(forces, l, d, d)
 
 
 @njit(**NUMBA_OPTIONS)
 def _system_entries(model, forces, h, rows, columns, values):
     """The entries of A = m + Δt C + Δt² K as triplets (duplicates to be summed), 3n for
-    the diagonal then 144 per link (its 4x4 blocks w_p w_q B, ``kernels.Links``); a pinned
+    the diagonal then 144 per link (its 4x4 blocks w_p w_q B, ``kernels.Forces``); a pinned
     vertex's rows and columns are the identity's. Returns how many were written."""
-    links = forces.links
     count = 0
     for i in range(model.rest_position.shape[0]):
         for d in range(3):
             rows[count] = columns[count] = 3 * i + d
-            free = model.mass + h * forces.damping[i] + h * h * links.diagonal[i]
+            free = model.mass + h * forces.damping[i] + h * h * forces.diagonal[i]
             values[count] = 1.0 if model.pinned[i] else free
             count += 1
-    for l in range(links.along.shape[0]):
+    for l in range(forces.along.shape[0]):
         for a in range(4):
-            p = links.node[l, a]
+            p = forces.node[l, a]
             for b in range(4):
-                q = links.node[l, b]
+                q = forces.node[l, b]
                 if model.pinned[p] or model.pinned[q]:
                     continue
-                w = h * h * links.weight[l, a] * links.weight[l, b]
+                w = h * h * forces.weight[l, a] * forces.weight[l, b]
                 for d in range(3):
                     for e in range(3):
                         rows[count] = 3 * p + d
                         columns[count] = 3 * q + e
-                        values[count] = w * _link_block(links, l, d, e)
+                        values[count] = w * _link_block(forces, l, d, e)
                         count += 1
     return count
 
@@ -205,8 +203,8 @@ def rest_preconditioner(model, h: float) -> Factor:
     n, arrays = model.vertex_count, model.arrays
     control = kernels.control(arrays, np.zeros(len(model.muscles.names)))
     forces = kernels.forces(arrays)
-    _forces(arrays, np.array(control.target), control, kernels.workspace(n), forces)
-    size = 3 * n + 144 * forces.links.along.shape[0]
+    _forces(arrays, np.array(control.target), control, kernels.workspace(arrays), forces)
+    size = 3 * n + 144 * forces.along.shape[0]
     rows, columns, values = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64), np.empty(size)
     count = _system_entries(arrays, forces, h, rows, columns, values)
     system = coo_matrix((values[:count], (rows[:count], columns[:count])), shape=(3 * n, 3 * n)).tocsc()

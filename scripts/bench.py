@@ -313,12 +313,18 @@ def scaling(levels: int, repeats: int, plot: Path | None) -> tuple[str, dict]:
         frames = max(4, round(35 * base_steps / model.material.substeps))
         table_ = activation_table(spec.with_overrides(frames=frames), model.muscles)
         run(model, table_[:2], spec.dt, stop_on_inversion=False)
-        seconds = median(timed(lambda: run(model, table_, spec.dt, stop_on_inversion=False), repeats if level < 3 else 1))
+        # one thread and two side by side, alternating, each the median of its runs
+        times = {1: [], 2: []}
+        for _ in range(repeats if level < 4 else 1):
+            for threads in times:
+                times[threads] += timed(lambda: run(model, table_, spec.dt, stop_on_inversion=False, threads=threads), 1)
+        seconds, both = median(times[1]), median(times[2])
         steps = len(table_) * model.material.substeps
         per = seconds / (steps * model.vertex_count)
-        figures[model.vertex_count] = per
+        figures[model.vertex_count] = (per, both / (steps * model.vertex_count))
         rows.append([level, f"{model.vertex_count:,}", f"{len(mesh.faces):,}", model.material.substeps, frames,
-                     f"{seconds * 1e3:,.1f}", f"{per * 1e9:.0f}", f"{1 / per / 1e6:.2f}"])
+                     f"{seconds * 1e3:,.1f}", f"{per * 1e9:.0f}", f"{1 / per / 1e6:.2f}", f"{both * 1e3:,.1f}",
+                     f"{seconds / both:.2f}x"])
     if plot:
         import matplotlib
 
@@ -326,19 +332,23 @@ def scaling(levels: int, repeats: int, plot: Path | None) -> tuple[str, dict]:
         import matplotlib.pyplot as plt
 
         n = np.array(list(figures))
+        cost = np.array(list(figures.values())) * 1e9
         fig, ax = plt.subplots(figsize=(6, 4))
-        ax.plot(n, np.array(list(figures.values())) * 1e9, "o-")
+        ax.plot(n, cost[:, 0], "o-", label="1 thread")
+        ax.plot(n, cost[:, 1], "s-", label="2 threads (wall time per vertex-step)")
+        ax.legend()
         ax.set_xscale("log")
         ax.set_xlabel("vertices (default face, Loop-subdivided 0-4 times)")
         ax.set_ylabel("ns per vertex-step")
         ax.set_ylim(bottom=0)
-        ax.set_title("facesim: simulation cost per vertex-step (1 core)")
+        ax.set_title("facesim: simulation cost per vertex-step")
         ax.grid(alpha=0.3)
         fig.tight_layout()
         fig.savefig(plot, dpi=110)
         plt.close(fig)
-    return table(["subdivisions", "vertices", "triangles", "sub-steps per frame", "frames", "happy (ms)",
-                  "ns per vertex-step", "million vertex-steps per second"], rows), figures
+    return table(["subdivisions", "vertices", "triangles", "sub-steps per frame", "frames", "happy, 1 thread (ms)",
+                  "ns per vertex-step", "million vertex-steps per second", "happy, 2 threads (ms)", "2 threads against 1"],
+                 rows), figures
 
 
 # --- rendering -------------------------------------------------------------------------
@@ -537,7 +547,7 @@ def profile(repeats: int) -> tuple[str, dict]:
         table_ = activation_table(spec, model.muscles)
         state = kernels.State(model.rest_position.copy(), np.zeros((n, 3)))
         control = kernels.control(arrays, table_[0])
-        work, forces, xp = kernels.workspace(n), kernels.forces(arrays), np.empty((n, 3))
+        work, forces, xp = kernels.workspace(arrays), kernels.forces(arrays), np.empty((n, 3))
         krylov = solver.Krylov(*(np.empty((n, 3)) for _ in range(5)), np.empty(3 * n), factor)
         iterations = []
         for frame, row in enumerate(table_):
@@ -586,14 +596,27 @@ where a step's time goes.
   (eq. 3.22-3.25, for every vertex of every active muscle's region, every step) done once
   per vertex for the sum of the muscles' 2D forces, a departure from the thesis's
   per-muscle projection that would have to be calibrated again.
-- **10 million vertex-steps per second per core at 28k vertices; `prange` 1.7x.** A
-  third of it or less (the scaling table: the thesis's step, Loop-subdivided face): the per-pair cost above, plus
-  cache misses once the working set (about 200 bytes per vertex) leaves the L2 cache above
-  10k vertices. `prange` was not built: the simulated mesh of every face facesim renders
-  is 468 vertices, where a parallel region's start (several µs, about ten per step) costs
-  more than it saves, and during a render Mesa's llvmpipe already runs on both cores.
-  What would close it for large meshes: a vertex order along a space-filling curve
-  (scipy's reverse Cuthill-McKee) and per-thread force buffers over the springs and pairs.
+- **10 million vertex-steps per second per core at 28k vertices.** Less than half of it
+  (the scaling table: the thesis's step, Loop-subdivided face). Profiled on 2026-12-02 at
+  27,614 vertices, one thread, per vertex-step: the edge repulsion 101 ns (six pairs a
+  vertex, each a projection onto its edge, a square root, a division, the (1 + s²)^ζ
+  factor and a scatter to three vertices), the muscles 107 ns (the back-projection of
+  eq. 3.22-3.25 at every vertex of every active muscle's region, about 200 ns per region
+  vertex, and the flood fills, 0.4 ms a step), the springs 37 ns. The quasi-implicit
+  step no longer writes the implicit solver's links (13% of the step). What would close
+  it: the pairs and springs in float32 over structure-of-arrays with the scatter replaced
+  by a per-vertex gather the compiler can vectorise, and a vertex order along a
+  space-filling curve (scipy's reverse Cuthill-McKee: Loop subdivision appends each
+  level's edge points after the old vertices, so neighbours lie far apart in memory);
+  neither is built.
+- **`prange`, 2 threads against 1.** The springs, the edge repulsion, the bending and
+  each muscle's region loop run on every core for a mesh of at least 4,000 vertices
+  (facesim.config.PARALLEL_FROM), scattering by fixed slices into buffers of their own so
+  the bits do not depend on the thread count (tests/test_kernels.py). Profiled at 27,614
+  vertices: springs 1.76x, repulsion 1.99x, muscles 1.52x (their flood fills stay serial),
+  the step 1.69x. The 468-vertex faces run these loops on one thread, where a parallel
+  region's start (0.5 µs on one thread, 1.5 µs on two) outweighs its share of a 100 µs
+  step; and during a render Mesa's llvmpipe already runs on both cores.
 - **25 frames per second end to end on the head at 512², antialiased.** Rendering is the
   cost: 26,719 vertices in nine materials through facesim's lit shader (pyrender's BRDF
   without the light types facesim does not use) in Mesa's software rasteriser. Measured
@@ -715,7 +738,8 @@ def main() -> int:
     throughput = dataset_throughput(6, 64, (1,)) if quick else dataset_throughput(120, 256)  # quick: one worker of each
     section("Datasets: samples per second, local processes and Dask", throughput)
 
-    per_core_28k = 1 / next((v for k, v in scale.items() if 20_000 < k < 40_000), float("nan")) / 1e6
+    cost_28k = next((v for k, v in scale.items() if 20_000 < k < 40_000), (float("nan"), float("nan")))
+    per_core_28k, threads_28k = 1 / cost_28k[0] / 1e6, cost_28k[0] / cost_28k[1]
     egl512 = render_figures.get(("egl", 512), render_figures.get(("egl", 64)))
     head_size = max(head_figures)
     head_e2e = head_figures[head_size]
@@ -727,7 +751,7 @@ def main() -> int:
          f"{solver_figures['the Hopper face']['implicit']:.2f} ms (implicit, the thesis's model; "
          f"{solver_figures['the Hopper face']['quasi']:.2f} ms by its quasi-implicit update)"],
         ["vertex-steps per second per core, ~28k vertices", "≥ 10 million", f"{per_core_28k:.2f} million"],
-        ["`prange`, 2 threads against 1", "≥ 1.7x", "not built (see below)"],
+        ["`prange`, 2 threads against 1, ~28k vertices", "≥ 1.7x", f"{threads_28k:.2f}x"],
         ["Numba step against the NumPy reference", "≥ 50x", f"{ratio:,.0f}x"],
         [f"happy end to end on the head at {head_size}², antialiased, to MP4, warm", "≥ 25 fps",
          f"{head_e2e['fps']:.1f} fps ({head_e2e['fps_plain']:.1f} fps with --no-antialias)"],

@@ -1,13 +1,18 @@
 """Every Numba kernel against its NumPy reference in tests/naive.py, on perturbed states,
 with the switches on and off, including degenerate inputs."""
 
+import numba
 import numpy as np
 import pytest
+import yaml
 
 import naive
 from conftest import material, spec
 from facesim import kernels as K, solver
-from facesim.config import HOPPER_MESH
+from facesim.config import HOPPER_MESH, HOPPER_MUSCLES, PARALLEL_FROM
+from facesim.mesh import load_mesh, subdivide, write_obj
+from facesim.muscles import MuscleFile, muscles_as_points
+from facesim.schema import load_model
 from facesim.simulate import model_for, run
 from facesim.spec import activation_table
 
@@ -161,7 +166,7 @@ def test_flood_fill_finds_the_brute_force_region(uv, rng):
     model = model_for(spec("happy", material=material(uv_projection=uv)))
     x, xp = perturbed(model, rng, scale=0.1)
     frame = naive.project_uv(xp, model.axis_x, model.axis_z, model.radius) if uv else xp
-    work = K.workspace(model.vertex_count)
+    work = K.workspace(model.arrays)
     work.frame[:] = frame
     region, delta = work.region, work.delta
     for m in range(model.muscle_count):
@@ -183,7 +188,7 @@ def test_muscle_forces_match_reference(uv, rng):
     activation[model.muscle_protrusion != 0] = 0.8
     control = K.control(model.arrays, np.concatenate([activation, np.zeros(len(model.muscles.names) - len(activation))]))
     forces = K.forces(model.arrays)
-    K._muscle_forces(model.arrays, xp, control, K.workspace(model.vertex_count), forces)
+    K._muscle_forces(model.arrays, xp, control, K.workspace(model.arrays), forces)
     force = forces.force
     expected = naive.muscle_forces(model, xp, activation)
     assert np.abs(expected).max() > 1.0
@@ -261,7 +266,7 @@ def test_step_matches_reference(switches, bones, rng):
     state = K.State(x.copy(), v.copy())
     n = model.vertex_count
     solver._quasi_implicit_step(model.arrays, state, K.control(model.arrays, activation), 0.0025, np.empty_like(x),
-                                K.workspace(n), K.forces(model.arrays))
+                                K.workspace(model.arrays), K.forces(model.arrays))
     assert_close(state.v, ref_v)
     assert_close(state.x, ref_x)
 
@@ -328,7 +333,7 @@ def test_non_finite_values_are_found_under_fastmath(bad):
 
 
 def dense_stiffness(links, n):
-    """K (3n, 3n) assembled from the links the terms wrote (kernels.Links), plainly."""
+    """K (3n, 3n) assembled from the links the terms wrote (kernels.Forces), plainly."""
     k = np.kron(np.diag(links.diagonal), np.eye(3))
     for node, weight, a, along, across in zip(links.node, links.weight, links.axis, links.along, links.across):
         block = along * np.outer(a, a) + across * (np.eye(3) - np.outer(a, a))
@@ -349,7 +354,7 @@ def test_links_are_the_jacobian_of_the_springs_tissue_and_bending(model, rng):
 
     def force(at):
         forces.force[:] = 0.0
-        forces.links.diagonal[:] = 0.0
+        forces.diagonal[:] = 0.0
         K._spring_forces(arrays, np.ascontiguousarray(at), forces)
         K._tissue_forces(arrays, np.ascontiguousarray(at), control, forces)
         K._bending_forces(arrays, np.ascontiguousarray(at), control, forces)
@@ -359,11 +364,11 @@ def test_links_are_the_jacobian_of_the_springs_tissue_and_bending(model, rng):
     eps = 1e-6
     derivative = -(force(x + eps * p) - force(x - eps * p)) / (2 * eps)
     force(x)
-    assert (forces.links.across[:len(model.spring_indices)] > 0).all()
+    assert (forces.across[:len(model.spring_indices)] > 0).all()
     product = np.empty_like(x)
-    solver._stiffness_product(forces.links, p, product)
+    solver._stiffness_product(forces, p, product)
     assert_close(product, derivative, rtol=1e-6)
-    assert_close(product.reshape(-1), dense_stiffness(forces.links, len(x)) @ p.reshape(-1))
+    assert_close(product.reshape(-1), dense_stiffness(forces, len(x)) @ p.reshape(-1))
 
 
 @pytest.mark.parametrize("face", ["head", "hopper"])
@@ -385,7 +390,7 @@ def test_implicit_step_solves_its_system(rng, bending, face):
     activation[:model.muscle_count] = rng.uniform(0.2, 1, model.muscle_count)
     control = K.control(model.arrays, activation)
     h, n = 0.01, model.vertex_count
-    state, work, forces = K.State(x.copy(), v.copy()), K.workspace(n), K.forces(model.arrays)
+    state, work, forces = K.State(x.copy(), v.copy()), K.workspace(model.arrays), K.forces(model.arrays)
     krylov = solver.Krylov(*(np.empty_like(x) for _ in range(5)), np.empty(3 * n), model.preconditioner(h))
     assert (krylov.factor.lower_start.size > 1) == (bending > 0)
     iterations = solver._implicit_step(model.arrays, state, control, h, np.empty_like(x), work, forces, krylov)
@@ -397,8 +402,8 @@ def test_implicit_step_solves_its_system(rng, bending, face):
     solver._forces(model.arrays, xp, control, work, forces)
     free = np.repeat(~model.pinned, 3)
     m = model.material.mass
-    a = np.diag(np.repeat(m + h * forces.damping, 3)) + h * h * dense_stiffness(forces.links, n)
-    b = m * v.reshape(-1) + h * forces.force.reshape(-1) + h * h * dense_stiffness(forces.links, n) @ v.reshape(-1)
+    a = np.diag(np.repeat(m + h * forces.damping, 3)) + h * h * dense_stiffness(forces, n)
+    b = m * v.reshape(-1) + h * forces.force.reshape(-1) + h * h * dense_stiffness(forces, n) @ v.reshape(-1)
     expected = np.zeros(3 * n)
     expected[free] = np.linalg.solve(a[np.ix_(free, free)], b[free])
     contact = np.isin(np.arange(n), np.r_[model.arrays.contact_upper, model.arrays.contact_lower])
@@ -435,3 +440,46 @@ def test_back_projection_turns_continuously_with_the_force(model):
             jumps = turned(i, np.linspace(angles[k], angles[k + 1], 1001))
         worst = max(worst, jumps.max())
     assert worst < 0.05
+
+
+def test_muscle_regions_kept_between_steps_follow_the_bones(rng):
+    """A workspace keeps each muscle's region while the bones stay (kernels.Workspace):
+    the forces through a reused workspace, after the jaw and lids have moved, are those of
+    a fresh one, and while the bones stay the kept regions are used, not found again."""
+    model = model_for(spec("surprise"))
+    arrays = model.arrays
+    _, xp = perturbed(model, rng, scale=0.05)
+    activation = np.zeros(len(model.muscles.names))
+    activation[:model.muscle_count] = rng.uniform(0.2, 1, model.muscle_count)
+    work = K.workspace(arrays)
+    for bones in (0.0, 0.8, 0.3):
+        activation[model.muscle_count:] = bones
+        control = K.control(arrays, activation)
+        kept, fresh = K.forces(arrays), K.forces(arrays)
+        K._muscle_forces(arrays, xp, control, work, kept)
+        assert (work.region_count >= 0).all() and work.region_count.sum() > 100
+        K._muscle_forces(arrays, xp, control, K.workspace(arrays), fresh)
+        assert_close(kept.force, fresh.force)
+        stamp = int(work.stamp[0])
+        K._muscle_forces(arrays, xp, control, work, kept)
+        assert work.stamp[0] == stamp  # no flood fill: every region was kept
+
+
+def test_parallel_loops_give_the_same_bits_on_one_thread_as_on_two(tmp_path):
+    """The springs, pairs and hinges scatter by fixed slices and sum them in slice order
+    (facesim.config.CHUNKS), so a mesh large enough for every core (PARALLEL_FROM) gives
+    the same positions, to the bit, whatever the thread count."""
+    base = load_mesh(HOPPER_MESH)
+    write_obj(tmp_path / "face.obj", subdivide(base, 2))
+    carried = muscles_as_points(load_model(HOPPER_MUSCLES, MuscleFile), base)
+    (tmp_path / "face.muscles.yaml").write_text(yaml.safe_dump(carried.model_dump(mode="json")))
+    s = spec("happy", frames=6, mesh=tmp_path / "face.obj", muscles=tmp_path / "face.muscles.yaml")
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one core: nothing to compare")
+    model = model_for(s)
+    assert model.vertex_count >= PARALLEL_FROM
+    table = activation_table(s, model.muscles)
+    one = run(model, table, s.dt, threads=1)[0]
+    both = run(model, table, s.dt, threads=2)[0]
+    assert np.abs(one[-1] - model.rest_position).max() > 0.01
+    assert np.array_equal(one, both)
