@@ -272,7 +272,7 @@ def _spring_forces(model, xp, forces):
     _gather_parts(forces)
 
 
-@njit(**NUMBA_OPTIONS)
+@njit(**PARALLEL_OPTIONS)
 def _tissue_forces(model, xp, control, forces):
     """Hypodermis springs: each vertex tied to its target (its rest position, moved by the
     jaw and eyelids) with stiffness k_t + tie_i + hold_i, the soft tissue that attaches
@@ -282,7 +282,7 @@ def _tissue_forces(model, xp, control, forces):
     every mode a restoring force. ``hold`` holds the skin over the
     mandible and the lid contours to their targets while the jaw and lids move."""
     force, stiffness, diagonal = forces.force, forces.stiffness, forces.diagonal
-    for i in range(xp.shape[0]):
+    for i in prange(xp.shape[0]):
         k = model.tissue + model.tie[i] + control.hold[i]
         stiffness[i] -= k
         diagonal[i] += k

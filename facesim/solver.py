@@ -47,10 +47,10 @@ triangles, kinetic energy).
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from . import kernels
-from .config import NUMBA_OPTIONS
+from .config import NUMBA_OPTIONS, PARALLEL_OPTIONS
 from .kernels import INVERTED, NOT_FINITE, OK, RUNAWAY
 
 #: The preconditioner of the implicit step: Pr A Pc = L U for the system A at rest
@@ -82,11 +82,11 @@ def _forces(model, xp, control, work, forces):
     kernels._muscle_forces(model, xp, control, work, forces)  # eq. 3.1-3.4, 3.21-3.25
 
 
-@njit(**NUMBA_OPTIONS)
+@njit(**PARALLEL_OPTIONS)
 def _predict(model, state, control, h, xp):
     """X* = X + Δt V (eq. 3.14); a pinned vertex is where its bone holds it."""
     x, v = state.x, state.v
-    for i in range(x.shape[0]):
+    for i in prange(x.shape[0]):
         for d in range(3):
             if model.pinned[i]:
                 x[i, d] = control.target[i, d]
@@ -95,13 +95,13 @@ def _predict(model, state, control, h, xp):
                 xp[i, d] = x[i, d] + h * v[i, d]
 
 
-@njit(**NUMBA_OPTIONS)
+@njit(**PARALLEL_OPTIONS)
 def _quasi_implicit_step(model, state, control, h, xp, work, forces):
     """One step of the thesis's update (module docstring), in place."""
     _predict(model, state, control, h, xp)
     _forces(model, xp, control, work, forces)
     x, v, m = state.x, state.v, model.mass
-    for i in range(x.shape[0]):
+    for i in prange(x.shape[0]):
         if model.pinned[i]:
             for d in range(3):
                 v[i, d] = 0.0

@@ -614,7 +614,9 @@ where a step's time goes.
   (facesim.config.PARALLEL_FROM), scattering by fixed slices into buffers of their own so
   the bits do not depend on the thread count (tests/test_kernels.py). Profiled at 27,614
   vertices: springs 1.76x, repulsion 1.99x, muscles 1.52x (their flood fills stay serial),
-  the step 1.69x. The 468-vertex faces run these loops on one thread, where a parallel
+  the step with the prediction, the hypodermis and the update also parallel 1.80x; the
+  whole run in the scaling table adds the per-frame checks, serial. The 468-vertex faces
+  run these loops on one thread, where a parallel
   region's start (0.5 µs on one thread, 1.5 µs on two) outweighs its share of a 100 µs
   step; and during a render Mesa's llvmpipe already runs on both cores.
 - **25 frames per second end to end on the head at 512², antialiased.** Rendering is the
