@@ -452,19 +452,19 @@ r.close()
 # end to end as `facesim render` runs it: simulate, then render and encode overlapped
 from facesim.output import write_animation
 e2e = {{}}
-for antialias in (True, False):
-    settings = RenderSettings(size, size, antialias=antialias)
+for key, settings in (("fps", RenderSettings(size, size)), ("fps_supersample", RenderSettings(size, size, supersample=True)),
+                      ("fps_plain", RenderSettings(size, size, antialias=False))):
     with FaceRenderer.of(a, settings, backend) as renderer:
         walls = []
         for _ in range(repeats + 1):
             path = Path(tempfile.mkdtemp()) / "e2e.mp4"
             t = time.perf_counter(); write_animation(facesim.simulate(spec), path, settings, renderer=renderer)
             walls.append(time.perf_counter() - t)
-        e2e[antialias] = a.frames / statistics.median(walls[1:])
+        e2e[key] = a.frames / statistics.median(walls[1:])
 m = statistics.median
 print(json.dumps(dict(sim=m(sim), build=build, ours=m(ours), floor=m(floor), pbr=m(pbr), encode=m(encode), frames=a.frames,
                       vertices=len(figure.rest), triangles=len(figure.triangles), simulated=model.vertex_count,
-                      backend=r.backend, fps=e2e[True], fps_plain=e2e[False])))
+                      backend=r.backend, **e2e)))
 """
 
 
@@ -476,18 +476,20 @@ def head(sizes: list[int], repeats: int) -> tuple[str, dict]:
         figures[size] = h
         rows.append([f"{size}²", f"{h['sim'] * 1e3:.1f}", f"{h['ours'] * 1e3:.1f}", f"{h['floor'] * 1e3:.1f}",
                      f"{h['ours'] / h['floor']:.2f}", f"{h['pbr'] * 1e3:.1f}", f"{h['pbr'] / h['floor']:.2f}x",
-                     f"{h['encode'] * 1e3:.0f}", f"{h['fps']:.1f}", f"{h['fps_plain']:.1f}"])
+                     f"{h['encode'] * 1e3:.0f}", f"{h['fps']:.1f}", f"{h['fps_supersample']:.1f}", f"{h['fps_plain']:.1f}"])
     h = figures[sizes[-1]]
     text = table(["size", "happy, 35 frames, simulation (ms)", "facesim per frame (ms)", "bare pyrender floor (ms)",
                   "ratio", "the floor with pyrender's PBR shader (ms)", "its cost against facesim's lit shader",
-                  "MP4 encode alone (ms)", "end-to-end fps", "end-to-end fps, --no-antialias"], rows)
+                  "MP4 encode alone (ms)", "end-to-end fps", "end-to-end fps, --supersample",
+                  "end-to-end fps, --no-antialias"], rows)
     text += (f"\n\nThe head draws {h['vertices']:,} vertices and {h['triangles']:,} triangles ({h['backend']}); "
              f"its skin is simulated on {h['simulated']} vertices (facesim.head). The floor uploads the same "
              "vertex buffers, computed before the clock starts, and renders the same scene with the same renderer: "
              "facesim's frame adds the skin's interpolation (facesim.figure), the jaw, the eyelid contact and the "
              f"normals. Building the head's figure the first time in a process: {h['build']:.2f} s (its skin "
              "weights read from facesim's on-disk cache; solving for them takes about 1.2 s, once per machine). "
-             f"Antialiasing renders at twice the size and averages (facesim.render). Simulation: median of warm "
+             "Antialiasing filters each frame along its edges (facesim.render, an FXAA-style pass); --supersample "
+             "renders at twice the size and averages, 4 samples per pixel. Simulation: median of warm "
              f"runs; render and encode: medians of {repeats}; end-to-end fps: 35 frames over the wall time of "
              "simulating and writing the MP4 as `facesim render` does (frames stream to the encoder while the next "
              "renders), renderer warm, median of the runs after the first.")
@@ -619,21 +621,22 @@ where a step's time goes.
   run these loops on one thread, where a parallel
   region's start (0.5 µs on one thread, 1.5 µs on two) outweighs its share of a 100 µs
   step; and during a render Mesa's llvmpipe already runs on both cores.
-- **25 frames per second end to end on the head at 512², antialiased.** Rendering is the
-  cost: 26,719 vertices in nine materials through facesim's lit shader (pyrender's BRDF
-  without the light types facesim does not use) in Mesa's software rasteriser. Measured
-  on 2026-12-01, EGL, warm, per frame: drawing and reading back 34 ms at 256², 47 ms at
-  512² and 114 ms at 1024² (about 30 ms a frame whatever the size, for the vertices and
-  triangles, and 80 ms per million pixels); around it the head's interpolation 4 ms, the
-  normals 0.7 ms, the buffer uploads 2-3 ms, and the 2x2 average 11 ms (one thread).
-  Antialiasing draws at 1024², so a frame is about 130 ms; multisampling costs more in
-  llvmpipe (108 ms at 512² with 2 or 4 samples). Simulation (about 1.5 ms a frame) and
-  encoding (overlapped) are small. Tried the same day, side by side in one process at
-  512² antialiased: the skin drawn first so that the depth test discards the teeth and
-  mouth behind it gains nothing measurable; culling the skin's back faces 8-18% (not
-  taken: a saving that size does not reach the target). What would close it: a GPU; on
-  the CPU, an edge-directed filter on the 512² frame in place of drawing four times the
-  pixels.
+- **25 frames per second end to end on the head at 512², antialiased.** Antialiasing is
+  now a filter on the frame as drawn (facesim.render._smooth_edges, the sub-pixel pass of
+  FXAA: a pixel at an edge is blended toward its neighbour across it), about 0.4 ms a
+  frame at 512² where drawing four times the pixels cost 30 ms more (measured on
+  2026-12-02, the head's smile: 29.8 ms a frame unfiltered, 30.2 filtered, 59.7
+  supersampled). Against the 4-samples frame the filtered one is 44.3 dB, the unfiltered
+  41.5 dB (at 256²: 40.7 against 38.7, tests/test_head.py); `--supersample` keeps the 4
+  samples for finer shading. The rest of a frame is Mesa's software rasteriser:
+  26,719 vertices in nine materials through facesim's lit shader (pyrender's BRDF
+  without the light types facesim does not use); on 2026-12-01 (the AMD EPYC), EGL, warm,
+  per frame, drawing and reading back took 34 ms at 256², 47 ms at 512² and 114 ms at
+  1024²; around it the head's interpolation 4 ms, the normals 0.7 ms, the buffer uploads
+  2-3 ms. Multisampling costs more in llvmpipe (108 ms at 512² with 2 or 4 samples).
+  Simulation (about 1.5 ms a frame) and encoding (overlapped) are small. Tried then, side
+  by side at 512²: the skin drawn first so that the depth test discards the teeth and
+  mouth behind it gains nothing measurable; culling the skin's back faces 8-18%.
 - **3 s for `facesim render` in a fresh process.** Profiled on 2026-12-01 (9.3-10.2 s
   wall that day): imports about 1.1 s (facesim, Numba's cached kernels, pyrender,
   trimesh, scipy); the model 2.7 s (the head archive read and checked 1.1 s, the model's
@@ -756,7 +759,8 @@ def main() -> int:
         ["`prange`, 2 threads against 1, ~28k vertices", "≥ 1.7x", f"{threads_28k:.2f}x"],
         ["Numba step against the NumPy reference", "≥ 50x", f"{ratio:,.0f}x"],
         [f"happy end to end on the head at {head_size}², antialiased, to MP4, warm", "≥ 25 fps",
-         f"{head_e2e['fps']:.1f} fps ({head_e2e['fps_plain']:.1f} fps with --no-antialias)"],
+         f"{head_e2e['fps']:.1f} fps ({head_e2e['fps_supersample']:.1f} fps with --supersample, "
+         f"{head_e2e['fps_plain']:.1f} with --no-antialias)"],
         ["`facesim render expressions/happy.yaml`, fresh process, warm caches", "≤ 3 s",
          f"{wall:.2f} s, peak memory {peak_mb:.0f} MB"],
         ["one implicit step per frame against converged small steps, held apex of the eight expressions", "≤ 2%",

@@ -129,6 +129,25 @@ def test_the_lit_shader_draws_what_pyrenders_draws():
     assert np.abs(ours.astype(int) - theirs.astype(int)).max() <= 1
 
 
+def test_antialiasing_by_the_edge_filter_comes_toward_four_samples_per_pixel():
+    """The default antialiasing filters the frame as drawn along its edges
+    (render._smooth_edges): happy's apex on the head comes nearer the same frame drawn
+    with 4 samples per pixel than the unfiltered frame is (measured at 256²: 40.7 dB
+    against 38.7), and only pixels at edges change (3% of the frame)."""
+    animation = simulate(spec("happy"))
+    frames = {}
+    for name, antialias, supersample in (("none", False, False), ("edge", True, False), ("four", True, True)):
+        with FaceRenderer.of(animation, RenderSettings(256, 256, antialias=antialias, supersample=supersample)) as renderer:
+            frames[name] = renderer.frame(animation, animation.frames - 1)[:, :, :3].astype(float)
+
+    def psnr(a, b):
+        return 10 * np.log10(255**2 / ((a - b) ** 2).mean())
+
+    assert psnr(frames["edge"], frames["four"]) > psnr(frames["none"], frames["four"]) + 1.5
+    changed = (frames["edge"] != frames["none"]).any(axis=2).mean()
+    assert 0.005 < changed < 0.15
+
+
 @needs_mediapipe
 def test_mediapipe_finds_the_default_head_where_its_points_project():
     from facesim.photo import detect_landmarks
@@ -147,12 +166,13 @@ def test_mediapipe_finds_the_default_head_where_its_points_project():
 
 
 def _teeth_pixels(animation, frame: int) -> int:
-    """Pixels where the teeth show: the frame drawn with the teeth painted pure green."""
+    """Pixels where the teeth show: the frame drawn with 4 samples per pixel (the bounds
+    below were measured so) and the teeth painted pure green."""
     figure = animation.figure
     colour = figure.colour.copy()
     colour[animation.model.mesh.head.part("teeth")] = (0.0, 1.0, 0.0, 1.0)
     painted = dataclasses.replace(figure, colour=colour)
-    with FaceRenderer(animation.rest, animation.faces, RenderSettings(512, 512), figure=painted) as renderer:
+    with FaceRenderer(animation.rest, animation.faces, RenderSettings(512, 512, supersample=True), figure=painted) as renderer:
         image = renderer.render(animation.positions[frame], jaw=animation.jaw_at(frame)).astype(int)
     return int(((image[..., 1] > 2 * image[..., 0] + 20) & (image[..., 1] > 2 * image[..., 2] + 20)).sum())
 
