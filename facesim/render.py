@@ -617,18 +617,24 @@ class FaceRenderer:
         if self._backdrop is not None:  # --onto: the alpha drawn where the head is, none elsewhere
             colour = np.array(colour)
             colour[:, :, 3] *= depth > 0
-        if self._smooth:
-            image = np.empty_like(colour)
-            _smooth_edges(colour, image)
-        elif self._factor == 1:
-            image = colour
-        else:
-            image = np.empty((self.settings.height, self.settings.width, colour.shape[2]), dtype=np.uint8)
-            _downsample(colour, self._factor, image)
+        image = self._antialiased(colour)
         if self._backdrop is None:
             return image
         alpha = image[:, :, 3:] / 255.0  # lays the frame over the photo
         return np.clip(np.rint(alpha * image[:, :, :3] + (1.0 - alpha) * self._backdrop), 0, 255).astype(np.uint8)
+
+    def _antialiased(self, colour: np.ndarray) -> np.ndarray:
+        """The frame as drawn, antialiased as the settings ask: filtered along its edges,
+        averaged down from the supersampled size, or as it is."""
+        if self._smooth:
+            image = np.empty_like(colour)
+            _smooth_edges(colour, image)
+            return image
+        if self._factor == 1:
+            return colour
+        image = np.empty((self.settings.height, self.settings.width, colour.shape[2]), dtype=np.uint8)
+        _downsample(colour, self._factor, image)
+        return image
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """(k, 2) pixel coordinates (x right, y down) where points (k, 3) of the head at

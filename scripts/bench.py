@@ -366,9 +366,9 @@ for _ in range(repeats):
     t = time.perf_counter()
     for p in a.positions: r.render(p)
     ours.append((time.perf_counter() - t) / frames)
-    # the floor: the same scene, the same renderer and settings, nothing updated
+    # the floor: the same scene, the same renderer, settings and antialiasing, nothing updated
     t = time.perf_counter()
-    for _ in range(frames): r._renderer.render(r._scene, flags=r._flags)
+    for _ in range(frames): r._antialiased(r._renderer.render(r._scene, flags=r._flags)[0])
     floor.append((time.perf_counter() - t) / frames)
 print(json.dumps(dict(ours=statistics.median(ours), floor=statistics.median(floor), backend=r.backend)))
 """
@@ -435,7 +435,7 @@ def floor_frame(data, programs):
     r._renderer._renderer._program_cache = programs
     for (primitive, _, _), d in zip(r._parts, data):
         r._upload(primitive, d)
-    r._renderer.render(r._scene, flags=r._flags)
+    r._antialiased(r._renderer.render(r._scene, flags=r._flags)[0])
 
 floor_frame(buffers[0], programs["pbr"])
 ours, floor, pbr, encode = [], [], [], []
@@ -484,7 +484,8 @@ def head(sizes: list[int], repeats: int) -> tuple[str, dict]:
                   "end-to-end fps, --no-antialias"], rows)
     text += (f"\n\nThe head draws {h['vertices']:,} vertices and {h['triangles']:,} triangles ({h['backend']}); "
              f"its skin is simulated on {h['simulated']} vertices (facesim.head). The floor uploads the same "
-             "vertex buffers, computed before the clock starts, and renders the same scene with the same renderer: "
+             "vertex buffers, computed before the clock starts, and renders the same scene with the same renderer "
+             "and antialiasing: "
              "facesim's frame adds the skin's interpolation (facesim.figure), the jaw, the eyelid contact and the "
              f"normals. Building the head's figure the first time in a process: {h['build']:.2f} s (its skin "
              "weights read from facesim's on-disk cache; solving for them takes about 1.2 s, once per machine). "
@@ -637,13 +638,15 @@ where a step's time goes.
   Simulation (about 1.5 ms a frame) and encoding (overlapped) are small. Tried then, side
   by side at 512²: the skin drawn first so that the depth test discards the teeth and
   mouth behind it gains nothing measurable; culling the skin's back faces 8-18%.
-- **3 s for `facesim render` in a fresh process.** Profiled on 2026-12-01 (9.3-10.2 s
-  wall that day): imports about 1.1 s (facesim, Numba's cached kernels, pyrender,
-  trimesh, scipy); the model 2.7 s (the head archive read and checked 1.1 s, the model's
-  arrays 1.4 s); the GL context and scene 1.0 s; the 35 frames 5.1 s. What would close
-  it: the frame cost above (at 25 frames a second the frames alone take 1.4 s), the
-  model's arrays kept in facesim's on-disk cache as the skin weights are, or a
-  long-lived render server keeping imports, model and context warm.
+- **3 s for `facesim render` in a fresh process.** Profiled on 2026-12-02 (3.8-4.2 s
+  wall that day), in order: importing the command line 0.4 s; the model 0.7 s (the head
+  archive read and checked, the model's arrays); the head's figure 0.1 s; the simulation
+  0.2 s (Numba's cached kernels loaded); the GL context and scene 0.6 s; the 35 frames
+  about 1.2 s now that antialiasing is a filter (2.5 s supersampled), encoding overlapped;
+  and the interpreter's start and exit. What would close it: the model's arrays kept in
+  facesim's on-disk cache as the skin weights are, and the GL context made while the
+  model is built (in a thread: OpenGL's imports and Mesa's start do not need the model),
+  or a long-lived render server keeping imports, model and context warm.
 - **50 ms for happy on the head.** Met on some machines of this kind and not on others:
   38 ms on 2026-12-02 (an Intel Xeon), 52 ms on 2026-12-01 (an AMD EPYC), where the
   Hopper face's same code took 22 and 35 ms. Side by side in one process (2026-12-01),
@@ -734,8 +737,8 @@ def main() -> int:
             ("" if quick else "\n\n![cost per vertex-step](docs/scaling.png)"))
     text, render_figures = rendering([64] if quick else [256, 512, 1024], 1 if quick else 3, 12 if quick else 70)
     section("Rendering: facesim against the bare pyrender floor", text + "\n\nThe floor renders the same scene "
-            "with the same renderer and settings and updates nothing; facesim's frame adds the vertex normals "
-            "(Numba) and the in-place vertex-buffer upload.")
+            "with the same renderer and settings, antialiased the same way (the edge filter), and updates nothing; "
+            "facesim's frame adds the vertex normals (Numba) and the in-place vertex-buffer upload.")
 
     text, head_figures = head([64] if quick else [256, 512], 1 if quick else 3)
     section("The default head (ICT FaceKit), happy", text)
