@@ -19,8 +19,8 @@ them, one line per term.
                              where the muscles' ends are as the bones move
 - ``_contacts``              lips and lids kept apart (a position projection after a step)
 
-The springs, the edge repulsion, the bending and each muscle's region run on every core
-for a large mesh (``prange``, facesim.config.PARALLEL_FROM): a link term scatters by
+The springs, the edge repulsion, the bending, the hypodermis, the muscles' frame and each
+muscle's region run on every core for a large mesh (``prange``, facesim.config.PARALLEL_FROM): a link term scatters by
 ``CHUNKS`` fixed slices of its links into buffers of their own, summed per vertex in slice
 order (``_gather_parts``), so the bits do not depend on the thread count. Inside a
 parallel loop every array is written through a local name: Numba 0.68 drops writes made
@@ -76,7 +76,8 @@ Control = namedtuple("Control", ["activation", "target", "hold", "origin", "inse
 #: compressed (the usual clamp: a compressed spring's sideways instability is left out);
 #: a hinge's B is isotropic (along = across). The link terms scatter into ``part``
 #: (CHUNKS, n, 3) and ``part_stiffness`` (CHUNKS, n), one slice of the links each, summed
-#: per vertex and zeroed after each term (``_gather_parts``). One flat tuple: Numba's parallel loops take no tuple nested in another.
+#: per vertex and zeroed after each term (``_gather_parts``). One flat tuple: Numba's
+#: parallel loops take no tuple nested in another.
 Forces = namedtuple("Forces", ["force", "stiffness", "damping", "node", "weight", "axis", "along", "across", "diagonal",
                                "part", "part_stiffness"])
 #: Scratch arrays of the muscle terms: the points in the muscles' frame (n, 3), the flood
@@ -408,9 +409,8 @@ def _bending_forces(model, xp, control, forces):
 def _damping_forces(model, forces):
     """Viscous damping, eq. 3.10: F = -c V, left to the solver as C_i = c, which it takes
     at the new velocity (implicitly, as eq. 3.19 does)."""
-    damping = forces.damping
-    for i in range(damping.shape[0]):
-        damping[i] += model.damping
+    for i in range(forces.damping.shape[0]):
+        forces.damping[i] += model.damping
 
 
 @njit(**NUMBA_OPTIONS)
@@ -685,9 +685,9 @@ def _pull_region(model, m, a_m, region, delta, count, frame, xp, control, force)
 
 @njit(**NUMBA_OPTIONS)
 def _bones_moved(model, target, work):
-    """Whether the bones hold the skin elsewhere than where the kept regions were found
-    (``Workspace``); if so, forget the regions and put the points where the skin is
-    attached into the muscles' frame (``work.attached``) for the flood fills to come."""
+    """If the bones hold the skin elsewhere than where the kept regions were found
+    (``Workspace``), forget the regions and put the points where the skin is attached
+    into the muscles' frame (``work.attached``) for the flood fills to come."""
     same = work.known[0] == 1
     if same:
         for i in range(target.shape[0]):
@@ -698,13 +698,12 @@ def _bones_moved(model, target, work):
             if not same:
                 break
     if same:
-        return False
+        return
     work.bones[:] = target
     work.known[0] = 1
     work.region_count[:] = -1
     work.kept[0] = 0
     _muscle_frame(model, target, work.attached)
-    return True
 
 
 @njit(**NUMBA_OPTIONS)
@@ -746,13 +745,12 @@ def _rig_control(model, control):
     ends, from where the bones hold them (``_muscle_geometry``)."""
     activation = control.activation
     theta = model.jaw_max * activation[model.jaw_column] if model.jaw_column >= 0 else 0.0
-    target, hold = control.target, control.hold
     for i in range(model.rest_position.shape[0]):
         px, py, pz = model.rest_position[i, 0], model.rest_position[i, 1], model.rest_position[i, 2]
         column = model.drive_column[i]
         a = activation[model.lid_raise_column[i]] if model.lid_raise_column[i] >= 0 else 0.0
         driving = max(activation[column], a) if column >= 0 else 0.0
-        hold[i] = model.drive * model.drive_weight[i] * min(1.0, 10.0 * driving)
+        control.hold[i] = model.drive * model.drive_weight[i] * min(1.0, 10.0 * driving)
         if model.lid_column[i] >= 0:
             c = activation[model.lid_column[i]]
             a *= 1.0 - c  # the levator lets go as the lid closes: a blink closes a raised lid
@@ -767,9 +765,9 @@ def _rig_control(model, control):
         if theta != 0.0 and model.jaw_weight[i] > 0.0:
             h, a = model.jaw_hinge, model.jaw_axis
             px, py, pz = _rotate(px, py, pz, h[0], h[1], h[2], a[0], a[1], a[2], model.jaw_weight[i] * theta)
-        target[i, 0] = px
-        target[i, 1] = py
-        target[i, 2] = pz
+        control.target[i, 0] = px
+        control.target[i, 1] = py
+        control.target[i, 2] = pz
     _muscle_geometry(model, control.target, control.origin, control.insertion_point)
 
 
