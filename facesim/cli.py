@@ -6,6 +6,7 @@ of the package; errors the user can act on are one line on stderr with exit code
 from __future__ import annotations
 
 import functools
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -16,7 +17,7 @@ import typer
 
 from .errors import FacesimError, InputError
 from .workers import capped_jobs
-from .writers import Terminated, check_destination, handle_termination
+from .writers import Terminated, check_destination, handle_termination, terminating_signal
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
                   help="Anatomy-based facial expression animation: simulate a muscle-driven face and render it offscreen.")
@@ -43,12 +44,17 @@ def handled(command):
         handle_termination()
         try:
             return command(*args, **kwargs)
-        except FacesimError as exc:
-            fail(str(exc), exc.exit_code)
         except KeyboardInterrupt:
             fail("interrupted; nothing was written", 130)
-        except Terminated as exc:
-            fail(f"stopped by {exc}; nothing was written", 128 + exc.signum)
+        except BaseException as exc:
+            # any error after SIGTERM or SIGHUP is the signal's: ctypes, for one, turns the
+            # signal's exception into an ArgumentError when it lands while arguments convert
+            signum = exc.signum if isinstance(exc, Terminated) else terminating_signal()
+            if signum is not None:
+                fail(f"stopped by {signal.Signals(signum).name}; nothing was written", 128 + signum)
+            if isinstance(exc, FacesimError):
+                fail(str(exc), exc.exit_code)
+            raise
 
     return wrapper
 

@@ -20,7 +20,7 @@ from .errors import InputError
 from .render import FaceRenderer, RenderSettings, shared_renderer
 from .simulate import Animation, muscle_forces
 from .workers import worker_pool
-from .writers import WriteError, atomic_path, check_destination
+from .writers import WriteError, atomic_path, check_destination, check_terminated
 
 FULL_DISK = 1 << 20  # bytes free under which a short output is put down to a full disk
 KINDS = {".mp4": "mp4", ".gif": "gif", ".npz": "npz"}
@@ -125,6 +125,7 @@ def iter_frames(animation: Animation, settings: RenderSettings, backend: str = "
         renderer = renderer or FaceRenderer.of(animation, settings, backend)
         try:
             for k in range(frames):
+                check_terminated()  # a signal that the OpenGL wrappers swallowed stops here
                 yield renderer.frame(animation, k, None if arrows is None else arrows[k])
                 if progress:
                     progress(1)
@@ -139,6 +140,7 @@ def iter_frames(animation: Animation, settings: RenderSettings, backend: str = "
     fixed = [(animation.rest, animation.faces, settings, backend, animation.figure, animation.face)] * len(chunks)
     with worker_pool(jobs) as pool:
         for (positions, *_), images in zip(chunks, pool.map(_render_chunk, *zip(*fixed), *zip(*chunks))):
+            check_terminated()
             yield from images
             if progress:
                 progress(len(positions))

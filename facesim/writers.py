@@ -14,6 +14,12 @@
 
 Any failure, Ctrl-C, SIGTERM or SIGHUP (which :func:`handle_termination` turns into an
 exception) removes the temporary; a write the disk refuses is one line, not a traceback.
+A signal's exception can land inside library code that swallows it (a bare ``except``) or
+turns it into another error (ctypes, converting an OpenGL call's arguments): so the
+signal is also recorded, :func:`check_terminated` raises it again at facesim's own
+checkpoints (each frame, and before anything is renamed into place), and
+:func:`terminating_signal` lets the command line report any error that follows it as the
+signal it was.
 """
 
 from __future__ import annotations
@@ -48,14 +54,32 @@ class Terminated(BaseException):
         self.signum = signum
 
 
+#: The signals received since :func:`handle_termination`, first first.
+_received: list[int] = []
+
+
 def handle_termination() -> None:
-    """Make SIGTERM and SIGHUP raise :class:`Terminated` in the main thread."""
+    """Make SIGTERM and SIGHUP raise :class:`Terminated` in the main thread, and record them."""
+    _received.clear()
 
     def raise_terminated(signum, _frame):
+        _received.append(signum)
         raise Terminated(signum)
 
     for signum in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(signum, raise_terminated)
+
+
+def terminating_signal() -> int | None:
+    """The first SIGTERM or SIGHUP received, or None."""
+    return _received[0] if _received else None
+
+
+def check_terminated() -> None:
+    """Raise :class:`Terminated` again if a signal arrived whose exception library code
+    swallowed: the work stops here, not at the end with its output written."""
+    if _received:
+        raise Terminated(_received[0])
 
 
 def _is_facesim_output(path: Path, directory: bool, names: frozenset | None = None) -> bool:
@@ -135,11 +159,13 @@ def atomic_path(path: str | Path, directory: bool = False, replace: bool = True,
         if directory:
             tmp.mkdir()
         yield tmp
+        check_terminated()
         if verify is not None:
             try:
                 verify(tmp)
             except WriteError as exc:
                 raise WriteError(f"{path}: {exc}; nothing was written") from None
+        check_terminated()
         _move_into_place(tmp, path, directory, replace)
     except BaseException as exc:
         if tmp.is_dir() and not tmp.is_symlink():

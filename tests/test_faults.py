@@ -247,6 +247,56 @@ def test_sigterm_during_the_write_leaves_nothing(tmp_path):
     assert not any(p.exists() for p in partial) and list(tmp_path.iterdir()) == [spec]
 
 
+@pytest.fixture
+def own_signal_handlers():
+    """facesim's SIGTERM and SIGHUP handlers in this process, the test runner's restored after."""
+    from facesim.writers import handle_termination
+
+    saved = {signum: signal.getsignal(signum) for signum in (signal.SIGTERM, signal.SIGHUP)}
+    handle_termination()
+    yield
+    for signum, handler in saved.items():
+        signal.signal(signum, handler)
+
+
+def swallowing_library(then=None):
+    """Library code that catches everything (a bare ``except``) while SIGTERM arrives."""
+    try:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(1.0)
+    except BaseException:
+        if then is not None:
+            raise then from None
+
+
+def test_a_signal_that_library_code_swallowed_still_leaves_nothing(tmp_path, own_signal_handlers):
+    """CI once saw a render go on to write all 400 frames, exit 0, after its SIGTERM."""
+    from facesim.writers import Terminated, atomic_path
+
+    with pytest.raises(Terminated, match="SIGTERM"):
+        with atomic_path(tmp_path / "a.mp4") as tmp:
+            tmp.write_bytes(b"....ftyp")
+            swallowing_library()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_error_a_signal_turned_into_is_reported_as_the_signal(own_signal_handlers, capsys):
+    """ctypes turns the signal's exception into an ArgumentError when it lands in an OpenGL
+    call's argument conversion: that was a traceback, and is the signal's one line."""
+    import typer
+
+    from facesim.cli import handled
+
+    @handled
+    def command():
+        swallowing_library(then=ValueError("argument 2: Terminated: SIGTERM"))
+
+    with pytest.raises(typer.Exit) as stopped:
+        command()
+    assert stopped.value.exit_code == 128 + signal.SIGTERM
+    assert capsys.readouterr().err == "facesim: error: stopped by SIGTERM; nothing was written\n"
+
+
 def test_sigterm_stops_a_long_simulation_within_seconds(tmp_path):
     """The kernel returns to Python every ~0.2 s (it once held Ctrl-C for 36 s)."""
     spec = write_spec(tmp_path, frames=100000, material={"substeps": 20}, activations={"zygomaticus_major_l": 0.5})
