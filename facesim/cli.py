@@ -17,7 +17,7 @@ import typer
 
 from .errors import FacesimError, InputError
 from .workers import capped_jobs
-from .writers import Terminated, check_destination, handle_termination, terminating_signal
+from .writers import Terminated, check_destination, handling_termination, terminating_signal
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
                   help="Anatomy-based facial expression animation: simulate a muscle-driven face and render it offscreen.")
@@ -41,20 +41,20 @@ def handled(command):
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
-        handle_termination()
-        try:
-            return command(*args, **kwargs)
-        except KeyboardInterrupt:
-            fail("interrupted; nothing was written", 130)
-        except BaseException as exc:
-            # any error after SIGTERM or SIGHUP is the signal's: ctypes, for one, turns the
-            # signal's exception into an ArgumentError when it lands while arguments convert
-            signum = exc.signum if isinstance(exc, Terminated) else terminating_signal()
-            if signum is not None:
-                fail(f"stopped by {signal.Signals(signum).name}; nothing was written", 128 + signum)
-            if isinstance(exc, FacesimError):
-                fail(str(exc), exc.exit_code)
-            raise
+        with handling_termination():
+            try:
+                return command(*args, **kwargs)
+            except KeyboardInterrupt:
+                fail("interrupted; nothing was written", 130)
+            except BaseException as exc:
+                # any error after SIGTERM or SIGHUP is the signal's: ctypes, for one, turns the
+                # signal's exception into an ArgumentError when it lands while arguments convert
+                signum = exc.signum if isinstance(exc, Terminated) else terminating_signal()
+                if signum is not None:
+                    fail(f"stopped by {signal.Signals(signum).name}; nothing was written", 128 + signum)
+                if isinstance(exc, FacesimError):
+                    fail(str(exc), exc.exit_code)
+                raise
 
     return wrapper
 

@@ -12,9 +12,8 @@
    meanwhile by another run is never clobbered without ``--force``; a replaced directory is
    first moved aside, so the old output exists until the new one does.
 
-Any failure, Ctrl-C, SIGTERM or SIGHUP (which :func:`handle_termination` turns into an
-exception) removes the temporary; a write the disk refuses is one line, not a traceback.
-A signal's exception can land inside library code that swallows it (a bare ``except``) or
+Any failure, Ctrl-C, SIGTERM or SIGHUP (an exception within :func:`handling_termination`)
+removes the temporary; a write the disk refuses is one line, not a traceback. A signal's exception can land inside library code that swallows it (a bare ``except``) or
 turns it into another error (ctypes, converting an OpenGL call's arguments): so the
 signal is also recorded, :func:`check_terminated` raises it again at facesim's own
 checkpoints (each frame, and before anything is renamed into place), and
@@ -54,20 +53,30 @@ class Terminated(BaseException):
         self.signum = signum
 
 
-#: The signals received since :func:`handle_termination`, first first.
+#: The signals received within :func:`handling_termination`, first first.
 _received: list[int] = []
 
 
-def handle_termination() -> None:
-    """Make SIGTERM and SIGHUP raise :class:`Terminated` in the main thread, and record them."""
-    _received.clear()
+@contextmanager
+def handling_termination():
+    """Within the block SIGTERM and SIGHUP raise :class:`Terminated` in the main thread,
+    and are recorded; the handlers before it, and an empty record, are restored after."""
+    signals = (signal.SIGTERM, signal.SIGHUP)
+    saved = {signum: signal.getsignal(signum) for signum in signals}
 
     def raise_terminated(signum, _frame):
         _received.append(signum)
         raise Terminated(signum)
 
-    for signum in (signal.SIGTERM, signal.SIGHUP):
+    _received.clear()
+    for signum in signals:
         signal.signal(signum, raise_terminated)
+    try:
+        yield
+    finally:
+        for signum, handler in saved.items():
+            signal.signal(signum, handler)
+        _received.clear()
 
 
 def terminating_signal() -> int | None:

@@ -250,13 +250,11 @@ def test_sigterm_during_the_write_leaves_nothing(tmp_path):
 @pytest.fixture
 def own_signal_handlers():
     """facesim's SIGTERM and SIGHUP handlers in this process, the test runner's restored after."""
-    from facesim.writers import handle_termination
+    from facesim.writers import handling_termination, terminating_signal
 
-    saved = {signum: signal.getsignal(signum) for signum in (signal.SIGTERM, signal.SIGHUP)}
-    handle_termination()
-    yield
-    for signum, handler in saved.items():
-        signal.signal(signum, handler)
+    with handling_termination():
+        yield
+    assert terminating_signal() is None  # nothing recorded is left for the next test
 
 
 def swallowing_library(then=None):
