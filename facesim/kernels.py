@@ -19,10 +19,12 @@ them, one line per term.
                              where the muscles' ends are as the bones move
 - ``_contacts``              lips and lids kept apart (a position projection after a step)
 
-The springs, the edge repulsion, the bending, the hypodermis, the muscles' frame and each
-muscle's region run on every core for a large mesh (``prange``, facesim.config.PARALLEL_FROM): a link term scatters by
-``CHUNKS`` fixed slices of its links into buffers of their own, summed per vertex in slice
-order (``_gather_parts``), so the bits do not depend on the thread count. Inside a
+The springs, the edge repulsion, the bending, the hypodermis, the muscles' frame, their
+flood fills and each muscle's region run on every core for a large mesh (``prange``,
+facesim.config.PARALLEL_FROM): a link term scatters by ``CHUNKS`` fixed slices of its
+links into buffers of their own, summed per vertex in slice order (``_gather_parts``), and
+the fills split the muscles by fixed slices (``_find_regions``), so the bits do not
+depend on the thread count. Inside a
 parallel loop every array is written through a local name: Numba 0.68 drops writes made
 there through a tuple's field (``forces.force[i] = ...``; measured), and takes no tuple
 nested in another (so ``Forces`` is flat).
@@ -80,28 +82,31 @@ Control = namedtuple("Control", ["activation", "target", "hold", "origin", "inse
 #: parallel loops take no tuple nested in another.
 Forces = namedtuple("Forces", ["force", "stiffness", "damping", "node", "weight", "axis", "along", "across", "diagonal",
                                "part", "part_stiffness"])
-#: Scratch arrays of the muscle terms: the points in the muscles' frame (n, 3), the flood
-#: fill's marks, stack, region and δ (n,), and the mark of the latest fill (1,). Where the
+#: Scratch arrays of the muscle terms: the points in the muscles' frame (n, 3); the flood
+#: fills' marks and stacks, one row per slice of the muscles (CHUNKS, n), and the mark of
+#: each slice's latest fill (CHUNKS,); a region and its δ (n,) for a fill that finds no
+#: room in the store. Each step's regions are found on every core (``_find_regions``)
+#: into the store: muscle m's region the ``region_count[m]`` entries of ``kept_vertex``
+#: and ``kept_delta`` from ``region_first[m]`` (a count of -1: not found), slice c
+#: writing only its share of the store, ``kept[c]`` entries of it in use. Where the
 #: regions are evaluated where the bones hold the skin (``attached_regions``), they change
-#: only when the bones move, and each muscle's is kept between steps: ``bones`` (n, 3) the
-#: targets they were found at (``known`` (1,): 0 until the first), muscle m's region the
-#: ``region_count[m]`` entries of ``kept_vertex`` and ``kept_delta`` from
-#: ``region_first[m]`` (a count of -1: not found since the bones last moved), ``kept`` (1,)
-#: the entries in use. A workspace serves one model.
+#: only when the bones move, and are kept between steps: ``bones`` (n, 3) the targets
+#: they were found at (``known`` (1,): 0 until the first). A workspace serves one model.
 Workspace = namedtuple("Workspace", ["frame", "attached", "visited", "stack", "region", "delta", "stamp", "bones", "known",
                                      "region_first", "region_count", "kept_vertex", "kept_delta", "kept"])
-#: Room for the kept regions, in vertices per mesh vertex: a region that does not fit is
-#: found again at every step, as when the bones move.
+#: Room for the regions, in vertices per mesh vertex: a region that does not fit in its
+#: slice's share is found alone, on one core, at every step.
 KEPT_REGIONS = 8
 
 
 def workspace(model: ModelArrays) -> Workspace:
     n, muscles = model.rest_position.shape[0], model.muscle_kind.shape[0]
     room = KEPT_REGIONS * n
-    return Workspace(np.empty((n, 3)), np.empty((n, 3)), np.zeros(n, dtype=np.int64), np.empty(n, dtype=np.int64),
-                     np.empty(n, dtype=np.int64), np.empty(n), np.zeros(1, dtype=np.int64), np.empty((n, 3)),
-                     np.zeros(1, dtype=np.int64), np.zeros(muscles, dtype=np.int64), np.full(muscles, -1, dtype=np.int64),
-                     np.empty(room, dtype=np.int64), np.empty(room), np.zeros(1, dtype=np.int64))
+    return Workspace(np.empty((n, 3)), np.empty((n, 3)), np.zeros((CHUNKS, n), dtype=np.int64),
+                     np.empty((CHUNKS, n), dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n),
+                     np.zeros(CHUNKS, dtype=np.int64), np.empty((n, 3)), np.zeros(1, dtype=np.int64),
+                     np.zeros(muscles, dtype=np.int64), np.full(muscles, -1, dtype=np.int64),
+                     np.empty(room, dtype=np.int64), np.empty(room), np.zeros(CHUNKS, dtype=np.int64))
 
 
 def forces(model: ModelArrays) -> Forces:
@@ -567,36 +572,72 @@ def _add_along_edge(xp, i, j, length, out):
 
 
 @njit(**NUMBA_OPTIONS)
-def _region_of_influence(model, m, origin, insertion_point, points, work):
+def _fill(model, m, origin, insertion_point, points, visited, stack, stamp, region, delta):
     """The stack-based flood fill of section 3.3 for muscle m, over ``points`` (in the
     muscles' frame): start at the insertion, pop a vertex, evaluate its δ (eq. 3.4), and
     push its neighbours only when δ is not negligible. Writes the region's vertices and
-    their δ into ``work.region`` and ``work.delta`` and returns how many there are; a new
-    ``work.stamp`` marks the vertices pushed."""
-    work.stamp[0] += 1
-    stamp = work.stamp[0]
-    visited, stack = work.visited, work.stack
+    their δ into ``region`` and ``delta``, as many as they hold, and returns how many there
+    are (more than they hold: the region did not fit); ``visited`` and ``stack`` (n,) are
+    the fill's own, its vertices marked with a new ``stamp[0]``."""
+    stamp[0] += 1
+    mark = stamp[0]
+    room = region.shape[0]
     start = model.muscle_insertion[m]
     count = 0
     top = 0
     stack[0] = start
-    visited[start] = stamp
+    visited[start] = mark
     while top >= 0:
         i = stack[top]
         top -= 1
         d = _delta(model, m, origin, insertion_point, points[i, 0], points[i, 1], points[i, 2])
         if d <= NEGLIGIBLE_DELTA:
             continue
-        work.region[count] = i
-        work.delta[count] = d
+        if count < room:
+            region[count] = i
+            delta[count] = d
         count += 1
         for k in range(model.neighbour_start[i], model.neighbour_start[i + 1]):
             j = model.neighbour_index[k]
-            if visited[j] != stamp:
-                visited[j] = stamp
+            if visited[j] != mark:
+                visited[j] = mark
                 top += 1
                 stack[top] = j
     return count
+
+
+@njit(**NUMBA_OPTIONS)
+def _region_of_influence(model, m, origin, insertion_point, points, work):
+    """Muscle m's region (``_fill``) into ``work.region`` and ``work.delta``, with the
+    first slice's marks; returns its size."""
+    return _fill(model, m, origin, insertion_point, points, work.visited[0], work.stack[0], work.stamp[0:1],
+                 work.region, work.delta)
+
+
+@njit(**PARALLEL_OPTIONS)
+def _find_regions(model, control, points, work):
+    """The region of every active muscle not yet found (``region_count`` -1), on every
+    core: muscle m falls to slice m mod CHUNKS (a muscle's two sides, listed one after the
+    other, to two slices), which fills its muscles one after another with marks and a
+    stack of its own into its share of the store (``Workspace``). Each fill is the same
+    on any thread, so the regions, and the forces pulled from them in the muscles' order,
+    do not depend on the thread count. A region too large for what is left of its share
+    keeps its count of -1 (``_muscle_forces`` finds it alone)."""
+    visited, stack, stamp, kept = work.visited, work.stack, work.stamp, work.kept  # written by local names (module docstring)
+    first, count, vertices, deltas = work.region_first, work.region_count, work.kept_vertex, work.kept_delta
+    share = vertices.shape[0] // CHUNKS
+    for c in prange(CHUNKS):
+        base = c * share
+        for m in range(c, model.muscle_kind.shape[0], CHUNKS):
+            if control.activation[m] == 0.0 or count[m] >= 0:
+                continue
+            used = kept[c]
+            found = _fill(model, m, control.origin, control.insertion_point, points, visited[c], stack[c],
+                          stamp[c:c + 1], vertices[base + used:base + share], deltas[base + used:base + share])
+            if found <= share - used:
+                first[m] = base + used
+                count[m] = found
+                kept[c] = used + found
 
 
 @njit(**PARALLEL_OPTIONS)
@@ -633,25 +674,27 @@ def _muscle_forces(model, xp, control, work, forces):
     muscle only pulls in its own plane and cannot move the skin off the face's surface.
     The push keeps its direction, so it adds no stiffness.
 
-    Attached regions change only when the bones move, so each muscle's is kept in the
-    workspace until they do (``Workspace``)."""
+    The regions not kept are found first, on every core (``_find_regions``); attached
+    regions change only when the bones move, so each muscle's is kept in the workspace
+    until they do (``Workspace``)."""
     _muscle_frame(model, xp, work.frame)
     frame = work.frame
     if model.attached_regions:
         _bones_moved(model, control.target, work)
+    else:  # the thesis's regions move with the skin: found again at every step
+        _forget_regions(work)
     points = work.attached if model.attached_regions else frame
+    _find_regions(model, control, points, work)
     for m in range(model.muscle_kind.shape[0]):
         a_m = control.activation[m]
         if a_m == 0.0:
             continue
-        if model.attached_regions and work.region_count[m] >= 0:
+        if work.region_count[m] >= 0:
             first, count = work.region_first[m], work.region_count[m]
             region, delta = work.kept_vertex[first:first + count], work.kept_delta[first:first + count]
-        else:
+        else:  # no room for it in the store
             count = _region_of_influence(model, m, control.origin, control.insertion_point, points, work)
             region, delta = work.region[:count], work.delta[:count]
-            if model.attached_regions:
-                _keep_region(m, count, work)
         _pull_region(model, m, a_m, region, delta, count, frame, xp, control, forces.force)
 
 
@@ -701,24 +744,15 @@ def _bones_moved(model, target, work):
         return
     work.bones[:] = target
     work.known[0] = 1
-    work.region_count[:] = -1
-    work.kept[0] = 0
+    _forget_regions(work)
     _muscle_frame(model, target, work.attached)
 
 
 @njit(**NUMBA_OPTIONS)
-def _keep_region(m, count, work):
-    """Keep muscle m's region, just found in ``work.region`` and ``work.delta``, until the
-    bones move (``Workspace``), if there is room."""
-    first = work.kept[0]
-    if first + count > work.kept_vertex.shape[0]:
-        return
-    for k in range(count):
-        work.kept_vertex[first + k] = work.region[k]
-        work.kept_delta[first + k] = work.delta[k]
-    work.region_first[m] = first
-    work.region_count[m] = count
-    work.kept[0] = first + count
+def _forget_regions(work):
+    """Empty the store of regions (``Workspace``): every region is found again."""
+    work.region_count[:] = -1
+    work.kept[:] = 0
 
 
 @njit(**NUMBA_OPTIONS)
