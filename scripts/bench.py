@@ -584,7 +584,7 @@ def profile(repeats: int) -> tuple[str, dict]:
     return table(["per step, µs (happy, frame 12)"] + list(columns), rows), figures
 
 
-ANALYSIS = """### Where the missed targets stand, and what would close them
+ANALYSIS = """### Where the targets stand: the missed ones and what would close them, and how the others were met
 
 The per-step profile above (each kernel looped in compiled code, so no call overhead) names
 where a step's time goes.
@@ -612,41 +612,55 @@ where a step's time goes.
   the limit: reordered by scipy's reverse Cuthill-McKee (with the triangles sorted to
   match, or not), the step cost the same within 3% at 27,614 and 109,758 vertices, on one
   thread and two (measured on 2026-12-02).
-- **`prange`, 2 threads against 1.** The springs, the edge repulsion, the bending and
-  each muscle's region loop run on every core for a mesh of at least 4,000 vertices
-  (facesim.config.PARALLEL_FROM), scattering by fixed slices into buffers of their own so
-  the bits do not depend on the thread count (tests/test_kernels.py). Profiled at 27,614
-  vertices: springs 1.76x, repulsion 1.99x, muscles 1.52x (their flood fills stay serial),
-  the step with the prediction, the hypodermis and the update also parallel 1.80x; the
-  whole run in the scaling table adds the per-frame checks, serial. The 468-vertex faces
-  run these loops on one thread, where a parallel region's start (0.5 µs on one thread,
-  1.5 µs on two) outweighs its share of a 100 µs step; and during a render Mesa's
-  llvmpipe already runs on both cores.
-- **25 frames per second end to end on the head at 512², antialiased.** Antialiasing is
-  now a filter on the frame as drawn (facesim.render._smooth_edges, the sub-pixel pass of
-  FXAA: a pixel at an edge is blended toward its neighbour across it), about 0.4 ms a
-  frame at 512² where drawing four times the pixels cost 30 ms more (measured on
-  2026-12-02, the head's smile: 29.8 ms a frame unfiltered, 30.2 filtered, 59.7
-  supersampled). Against the 4-samples frame the filtered one is 44.3 dB, the unfiltered
-  41.5 dB (at 256²: 40.7 against 38.7, tests/test_head.py); `--supersample` keeps the 4
-  samples for finer shading. The rest of a frame is Mesa's software rasteriser:
-  26,719 vertices in nine materials through facesim's lit shader (pyrender's BRDF
-  without the light types facesim does not use); on 2026-12-01 (the AMD EPYC), EGL, warm,
-  per frame, drawing and reading back took 34 ms at 256², 47 ms at 512² and 114 ms at
-  1024²; around it the head's interpolation 4 ms, the normals 0.7 ms, the buffer uploads
-  2-3 ms. Multisampling costs more in llvmpipe (108 ms at 512² with 2 or 4 samples).
-  Simulation (about 1.5 ms a frame) and encoding (overlapped) are small. Tried then, side
-  by side at 512²: the skin drawn first so that the depth test discards the teeth and
-  mouth behind it gains nothing measurable; culling the skin's back faces 8-18%.
-- **3 s for `facesim render` in a fresh process.** Profiled on 2026-12-02 (3.8-4.2 s
-  wall that day), in order: importing the command line 0.4 s; the model 0.7 s (the head
-  archive read and checked, the model's arrays); the head's figure 0.1 s; the simulation
-  0.2 s (Numba's cached kernels loaded); the GL context and scene 0.6 s; the 35 frames
-  about 1.2 s now that antialiasing is a filter (2.5 s supersampled), encoding overlapped;
-  and the interpreter's start and exit. What would close it: the model's arrays kept in
-  facesim's on-disk cache as the skin weights are, and the GL context made while the
-  model is built (in a thread: OpenGL's imports and Mesa's start do not need the model),
-  or a long-lived render server keeping imports, model and context warm.
+- **`prange`, 2 threads against 1.** The springs, the edge repulsion, the bending, the
+  muscles' flood fills (section 3.3; the muscles split by fixed slices,
+  kernels._find_regions) and each muscle's region loop run on every core for a mesh of
+  at least 4,000 vertices (facesim.config.PARALLEL_FROM), scattering by fixed slices into
+  buffers of their own so the bits do not depend on the thread count
+  (tests/test_kernels.py, for kept regions and for the thesis's, found at every step).
+  Profiled at 27,614 vertices on 2026-12-02: springs 1.77x, repulsion 1.99x, muscles
+  1.78x (1.57x while their flood fills, 0.4 ms a step, ran on one core), the whole
+  quasi-implicit step 1.92x (1.72x); the whole run in the scaling table adds the
+  per-frame checks (0.7 ms a frame, one core) and the calls' overheads. The 468-vertex
+  faces run these loops on one thread, where a parallel region's start (0.5 µs on one
+  thread, 1.5 µs on two) outweighs its share of a 100 µs step; and during a render
+  Mesa's llvmpipe already runs on both cores.
+- **The head's frame against its floor, 1.2x.** The floor draws the same scene with the
+  same renderer and antialiasing and updates nothing, so what is over it is facesim's
+  per-frame work. Profiled on 2026-12-02 at 512² (happy, EGL, warm; 22-24 ms a frame):
+  drawing and reading back 17-18 ms, the head's skin carried from the simulated mesh
+  (the sparse follow of facesim.figure, with the teeth, tongue and eyes placed) 2.2 ms,
+  the edge filter 1.3 ms (in the floor too), the normals 0.5 ms, the nine parts'
+  interleaved vertex arrays built and uploaded about 1.5 ms. Culling back faces made the
+  draw a quarter cheaper, so the same few milliseconds weigh more against it (1.23x
+  before). What would close it: the vertex arrays written in place by one compiled
+  kernel from the follow's product, and the follow computed for the next frame while
+  llvmpipe draws this one.
+- **25 frames per second end to end on the head at 512², antialiased: met since
+  2026-12-02.** Two changes: antialiasing is a filter on the frame as drawn
+  (facesim.render._smooth_edges, the sub-pixel pass of FXAA: a pixel at an edge is
+  blended toward its neighbour across it), where drawing four times the pixels cost 30
+  ms more a frame (against the 4-samples frame the filtered one is 44.3 dB, the
+  unfiltered 41.5 dB; at 256²: 40.7 against 38.7, tests/test_head.py; `--supersample`
+  keeps the 4 samples); and the head's opaque parts cull their back faces (the
+  eyelashes, cards, stay two-sided), 12-15% of a frame, the frames differing only where
+  a back face peeked past a silhouette (a few pixels of a few frames). The rest of a
+  frame is Mesa's software rasteriser: 26,719 vertices in nine materials through
+  facesim's lit shader (pyrender's BRDF without the light types facesim does not use).
+  Multisampling costs more in llvmpipe (108 ms at 512² with 2 or 4 samples, measured on
+  2026-12-01). Tried then: the skin drawn first, so that the depth test discards the
+  teeth and mouth behind it, gains nothing measurable.
+- **3 s for `facesim render` in a fresh process: met since 2026-12-02.** Profiled that
+  day before the changes (3.0-3.5 s wall), in order: importing the command line 0.3 s;
+  the model 0.6 s (with the imports of trimesh and SciPy it needs); the simulation 0.2 s
+  (Numba's cached kernels loaded); the head's figure 0.06 s; the GL context and scene
+  0.3 s; the 35 frames 1.2 s, encoding overlapped; then 0.3 s of the interpreter tearing
+  itself down (strace: no system call for 0.27 s after the last atexit handler), and
+  0.1 s importing matplotlib for one point-in-polygon test. facesim's command now
+  leaves by os._exit once its threads are joined, its atexit handlers run and its
+  streams flushed (facesim.cli.main), the lips' outline test is NumPy's, and the culled
+  back faces shorten the frames. Not needed then, and not built: the model's arrays in
+  the on-disk cache, the GL context made in a thread while the model builds.
 - **50 ms for happy on the head.** Met on some machines of this kind and not on others:
   38 ms on 2026-12-02 (an Intel Xeon), 52 ms on 2026-12-01 (an AMD EPYC), where the
   Hopper face's same code took 22 and 35 ms. Side by side in one process (2026-12-01),
