@@ -12,7 +12,10 @@ Not yet at rest within 200 frames, and bounded (the pairs' settling test is a st
 until it passes, so it fails the suite the day it does): 13 pairs, 5 of them with the
 pucker (AU18), 3 with AU9 and 2 with the funnel (AU22, the pucker's ring with the lips
 parted) (the largest AU12 + AU20: 0.24 mm a frame, kinetic energy 9.3e-4 of its peak;
-the others 0.01-0.12 mm). The buccinator pressing the lip corners in (AU14) took its two
+the others 0.005-0.11 mm; AU17 + AU24 at 1.3e-6 of its peak since the lip press took half
+the chin raiser). Which pairs flutter, and how much, shifts with rounding: the same pair
+listed the other way round sums its activations in another order and ends elsewhere in
+its flutter. The buccinator pressing the lip corners in (AU14) took its two
 pairs with the pucker out of that list; AU9's two pairs with the closed lids and
 AU6 + AU12 settle since the blink and AU1 changed. A flutter of the back-projected muscle
 force (eq. 3.22-3.25, not conservative), at the lips against their contact
