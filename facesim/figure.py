@@ -25,9 +25,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numba import njit, prange
 from scipy.sparse import coo_matrix, csr_matrix
 
 from . import cache, mesh
+from .config import PARALLEL_OPTIONS
 from .bake import TILES, atlas_uv
 from .head import Head
 from .mesh import FaceMesh, smooth_interpolation, unique_edges
@@ -105,8 +107,10 @@ class Figure:
     def positions(self, sim: np.ndarray, jaw_angle: float = 0.0, gaze: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
         """(N, 3): the figure for simulated positions ``sim`` (n, 3), the jaw's angle
         (radians) and the gaze (yaw, pitch in degrees)."""
-        x = self.rest.copy()
-        x[self.follow_rows] += self.follow @ (self.follow_gain[:, None] * (sim - self.sim_rest))
+        x = np.empty_like(self.rest)
+        follow = self.follow
+        _followed(self.rest, self.follow_rows, follow.indptr, follow.indices, follow.data, self.follow_gain,
+                  np.ascontiguousarray(sim, dtype=np.float64), self.sim_rest, x)
         if jaw_angle and len(self.jaw_rows):
             rest = self.rest[self.jaw_rows] - self.jaw_hinge
             turned = rest @ axis_rotation(self.jaw_axis, jaw_angle).T
@@ -121,6 +125,33 @@ class Figure:
             inside = r < radius
             x[rows[inside]] = centre + d[inside] * (radius[inside] / r[inside])[:, None]
         return x
+
+
+@njit(**dict(PARALLEL_OPTIONS, fastmath=False))
+def _followed(rest, rows, indptr, indices, weights, gain, sim, sim_rest, out):
+    """``out`` = the figure at rest, its skin rows moved by the follow (``skin_follow``,
+    in compressed rows) of the simulated vertices' displacements times their gain: the
+    sparse product of ``Figure.positions``, on every core, summed in the order SciPy's
+    product sums (without fastmath, so the same bits in every process)."""
+    moved = np.empty_like(sim)
+    for j in range(sim.shape[0]):
+        for d in range(3):
+            moved[j, d] = gain[j] * (sim[j, d] - sim_rest[j, d])
+    for i in prange(rest.shape[0]):
+        for d in range(3):
+            out[i, d] = rest[i, d]
+    for r in prange(rows.shape[0]):
+        sx = sy = sz = 0.0
+        for k in range(indptr[r], indptr[r + 1]):
+            j = indices[k]
+            w = weights[k]
+            sx += w * moved[j, 0]
+            sy += w * moved[j, 1]
+            sz += w * moved[j, 2]
+        i = rows[r]
+        out[i, 0] += sx
+        out[i, 1] += sy
+        out[i, 2] += sz
 
 
 def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:

@@ -238,6 +238,19 @@ def _stable_draw_order(scene) -> None:
 
 
 @njit(**NUMBA_OPTIONS)
+def _interleave(x, normals, rows, attribute, out):
+    """pyrender's interleaved vertex of the vertices ``rows`` of a part, in float32 into
+    ``out``: position, normal, then its uv or colour (``attribute``, one row a vertex)."""
+    for k in range(rows.shape[0]):
+        i = rows[k]
+        for d in range(3):
+            out[k, d] = x[i, d]
+            out[k, 3 + d] = normals[i, d]
+        for d in range(attribute.shape[1]):
+            out[k, 6 + d] = attribute[k, d]
+
+
+@njit(**NUMBA_OPTIONS)
 def _downsample(image, factor, out):
     """The mean of each ``factor`` x ``factor`` block of ``image`` (H, W, C) uint8 into
     ``out`` (H / factor, W / factor, C): a box filter, 4 samples per pixel at factor 2."""
@@ -536,6 +549,7 @@ class FaceRenderer:
                 attribute = colour
             scene.add(pyrender.Mesh([primitive]), parent_node=self._head)
             self._parts.append((primitive, rows, np.asarray(attribute, dtype=np.float32)))
+        self._vertex_arrays = [np.empty((len(rows), 6 + attribute.shape[1]), dtype=np.float32) for _, rows, attribute in self._parts]
 
     def _add_eyes_and_mouth(self, scene, rest, faces, pyrender, trimesh) -> None:
         eyes, mouth = _openings(rest, faces)
@@ -616,8 +630,9 @@ class FaceRenderer:
 
     def _draw_figure(self, scene: np.ndarray) -> None:
         _vertex_normals(scene, self._faces, self._normals)
-        for primitive, rows, attribute in self._parts:  # pyrender's interleaved vertex: position, normal, then uv or colour
-            self._upload(primitive, np.hstack([scene[rows], self._normals[rows], attribute]).astype(np.float32))
+        for (primitive, rows, attribute), vertices in zip(self._parts, self._vertex_arrays):
+            _interleave(scene, self._normals, rows, attribute, vertices)
+            self._upload(primitive, vertices)
 
     def _finish(self) -> np.ndarray:
         colour, depth = self._renderer.render(self._scene, flags=self._flags)
