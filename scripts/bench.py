@@ -626,16 +626,18 @@ where a step's time goes.
   thread, 1.5 µs on two) outweighs its share of a 100 µs step; and during a render
   Mesa's llvmpipe already runs on both cores.
 - **The head's frame against its floor, 1.2x.** The floor draws the same scene with the
-  same renderer and antialiasing and updates nothing, so what is over it is facesim's
-  per-frame work. Profiled on 2026-12-02 at 512² (happy, EGL, warm; 22-24 ms a frame):
-  drawing and reading back 17-18 ms, the head's skin carried from the simulated mesh
-  (the sparse follow of facesim.figure, with the teeth, tongue and eyes placed) 2.2 ms,
-  the edge filter 1.3 ms (in the floor too), the normals 0.5 ms, the nine parts'
-  interleaved vertex arrays built and uploaded about 1.5 ms. Culling back faces made the
-  draw a quarter cheaper, so the same few milliseconds weigh more against it (1.23x
-  before). What would close it: the vertex arrays written in place by one compiled
-  kernel from the follow's product, and the follow computed for the next frame while
-  llvmpipe draws this one.
+  same renderer and antialiasing and uploads vertex arrays computed before the clock
+  starts, so what is over it is facesim's per-frame work. Profiled on 2026-12-02 at 512²
+  (happy, EGL, warm; 22-24 ms a frame): drawing and reading back 17-19 ms, the edge
+  filter 1.3 ms (in the floor too), the head's skin carried from the simulated mesh (the
+  follow's sparse product, now compiled and on both cores, facesim.figure._followed)
+  0.9 ms looped and 1.6 ms between draws, the normals 0.4-0.7 ms, the nine parts'
+  vertex arrays written in place 0.3 ms (facesim.render._interleave; 1.0 ms when they
+  were stacked anew), the uploads 0.2 ms. Culling back faces made the draw a quarter
+  cheaper, so the same milliseconds weigh more against it; at 256² the draw is smaller
+  still. What would close it: the skin and normals of the next frame computed while
+  llvmpipe draws this one (a nogil kernel in a second thread), which at 512² is about
+  the 1-2 ms still over the bound.
 - **25 frames per second end to end on the head at 512², antialiased: met since
   2026-12-02.** Two changes: antialiasing is a filter on the frame as drawn
   (facesim.render._smooth_edges, the sub-pixel pass of FXAA: a pixel at an edge is
