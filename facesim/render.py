@@ -16,8 +16,11 @@ pyrender until :func:`use_backend` has chosen the platform.
 from __future__ import annotations
 
 import ctypes.util
+import functools
+import gc
 import os
 import sys
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -390,6 +393,70 @@ def _fitted_camera(camera, factor: int, pyrender) -> tuple:
     return view, pose
 
 
+#: Open renderers per EGL display. Every EGL renderer of a process gets the same display
+#: (one device), and pyrender terminates it when it deletes a renderer, which ended the
+#: context of every other renderer still open (measured: the second one's eglMakeCurrent
+#: then fails); so the display is terminated only with the last renderer on it.
+_egl_displays: dict[int, int] = {}
+
+
+def _share_egl_display(offscreen) -> None:
+    """Make ``offscreen`` (a pyrender.OffscreenRenderer) delete only its own EGL context,
+    and terminate the display when no other renderer is open on it."""
+    platform = offscreen._platform
+    display = getattr(platform, "_egl_display", None)
+    if display is None:  # OSMesa: each context stands alone
+        return
+    key = ctypes.cast(display, ctypes.c_void_p).value
+    _egl_displays[key] = _egl_displays.get(key, 0) + 1
+
+    def delete_context():
+        from OpenGL import EGL
+
+        if platform._egl_display is None:
+            return
+        if platform._egl_context is not None:
+            EGL.eglMakeCurrent(display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, EGL.EGL_NO_CONTEXT)
+            EGL.eglDestroyContext(display, platform._egl_context)
+            platform._egl_context = None
+        platform._egl_display = None
+        _egl_displays[key] -= 1
+        if _egl_displays[key] == 0:
+            del _egl_displays[key]
+            EGL.eglTerminate(display)
+
+    platform.delete_context = delete_context
+
+
+@contextmanager
+def _collection_paused():
+    """No garbage collection in the block. A renderer dropped without ``close`` is
+    finalised by the collector, whenever it runs, and pyrender's finalizer makes that
+    renderer's context current to delete it, then releases it: run between another
+    renderer's ``make_current`` and its GL calls, it would leave them on no context. (CI
+    once failed so, in glBindBuffer, after a test had dropped eight renderers; the
+    finalizer also terminated the EGL display then, ``_share_egl_display``.)"""
+    paused = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if paused:
+            gc.enable()
+
+
+def _in_own_context(method):
+    """A FaceRenderer method whose GL calls run on its context (``_collection_paused``)."""
+
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        with _collection_paused():
+            self._renderer._platform.make_current()
+            return method(self, *args, **kwargs)
+
+    return wrapper
+
+
 class FaceRenderer:
     """A pyrender scene of one face, rendered offscreen frame after frame."""
 
@@ -464,25 +531,27 @@ class FaceRenderer:
                       pose=_look_at(centre + FILL_DIRECTION, centre)),
         ]
         self._scene = scene
-        try:
-            self._renderer = pyrender.OffscreenRenderer(self._factor * settings.width, self._factor * settings.height)
-        except Exception as exc:
-            raise RenderError(
-                f"cannot open an offscreen GL context with {self.backend} ({type(exc).__name__}: {exc}); "
-                "install Debian's libosmesa6 or try --backend egl"
-            ) from None
-        if supersample or self._smooth or not settings.antialias:
-            _single_sample(self._renderer._renderer)
-        _lit_shader(self._renderer._renderer)
-        if settings.onto is None:
-            _colour_only(self._renderer._renderer)
-        wireframe = settings.wireframe and figure is None
-        self._flags = pyrender.RenderFlags.ALL_WIREFRAME if wireframe else pyrender.RenderFlags.NONE
-        if settings.look == "photo":
-            self._flags |= pyrender.RenderFlags.FLAT
-        if settings.onto is not None:
-            self._flags |= pyrender.RenderFlags.RGBA
-        self._renderer.render(self._scene, flags=self._flags)  # uploads the buffers once
+        with _collection_paused():  # the context is current from its creation to the first frame
+            try:
+                self._renderer = pyrender.OffscreenRenderer(self._factor * settings.width, self._factor * settings.height)
+            except Exception as exc:
+                raise RenderError(
+                    f"cannot open an offscreen GL context with {self.backend} ({type(exc).__name__}: {exc}); "
+                    "install Debian's libosmesa6 or try --backend egl"
+                ) from None
+            _share_egl_display(self._renderer)
+            if supersample or self._smooth or not settings.antialias:
+                _single_sample(self._renderer._renderer)
+            _lit_shader(self._renderer._renderer)
+            if settings.onto is None:
+                _colour_only(self._renderer._renderer)
+            wireframe = settings.wireframe and figure is None
+            self._flags = pyrender.RenderFlags.ALL_WIREFRAME if wireframe else pyrender.RenderFlags.NONE
+            if settings.look == "photo":
+                self._flags |= pyrender.RenderFlags.FLAT
+            if settings.onto is not None:
+                self._flags |= pyrender.RenderFlags.RGBA
+            self._renderer.render(self._scene, flags=self._flags)  # uploads the buffers once
 
     def _lines(self, scene, points: np.ndarray, colour) -> "pyrender.Primitive":
         """Line segments (point pairs) in one unlit colour, moved with the head."""
@@ -594,6 +663,7 @@ class FaceRenderer:
         for node, centre in self._eyes:  # the eyeball is built at the origin, pupil along +z
             self._scene.set_pose(node, _pose(_rotation(gaze_yaw, gaze_pitch), centre))
 
+    @_in_own_context
     def render(self, positions: np.ndarray, arrows: np.ndarray | None = None, pose=None, jaw: float = 0.0) -> np.ndarray:
         """One frame: positions (n, 3) of the face, optional arrows (n, 3) drawn from
         each vertex (muscle forces), optional head and gaze angles (5,) in degrees, the
@@ -601,7 +671,6 @@ class FaceRenderer:
         Returns (height, width, 3) uint8."""
         pose = np.zeros(5) if pose is None else np.asarray(pose, dtype=np.float64)
         positions = np.ascontiguousarray(positions, dtype=np.float64)
-        self._renderer._platform.make_current()
         if self._figure is None:
             self.pose(*pose)
             _vertex_normals(positions, self._faces, self._normals)
@@ -619,11 +688,11 @@ class FaceRenderer:
             self._upload(self._arrows, lines)
         return self._finish()
 
+    @_in_own_context
     def render_figure(self, scene: np.ndarray) -> np.ndarray:
         """One frame of a head given every vertex of its figure (N, 3) rather than its
         simulation mesh, at rest pose: a scanned shape drawn with the same camera and
         lights (``scripts/realism.py``'s atlas). Returns (height, width, 3) uint8."""
-        self._renderer._platform.make_current()
         self.pose()
         self._draw_figure(np.ascontiguousarray(scene, dtype=np.float64))
         return self._finish()
@@ -681,7 +750,8 @@ class FaceRenderer:
 
     def close(self) -> None:
         if getattr(self, "_renderer", None) is not None:
-            self._renderer.delete()
+            with _collection_paused():
+                self._renderer.delete()
             self._renderer = None
 
     def __enter__(self):

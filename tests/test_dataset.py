@@ -59,6 +59,8 @@ def test_every_renderer_of_a_head_draws_the_same_pixels():
         renderer.view(draw["yaw"], draw["pitch"], draw["light"])
         renderers.append(renderer)
         images.add(renderer.frame(animation, FRAMES - 1, pose=tuple(draw[n] for n in POSE_JITTER)).tobytes())
+    for renderer in renderers:
+        renderer.close()
     assert len(images) == 1
 
 

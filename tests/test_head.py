@@ -183,3 +183,45 @@ def test_teeth_show_in_the_rendered_mouth_when_the_jaw_opens():
     shown = _teeth_pixels(opened, opened.frames - 1)
     assert shown > 300  # about 460 of the 512² frame (the face framed)
     assert _teeth_pixels(opened, 0) < 0.2 * shown  # closed lips hide them but for a line at their seam (73 pixels)
+
+
+def test_a_renderer_dropped_without_close_does_not_disturb_another():
+    """pyrender's finalizer makes a dropped renderer's context current to delete it, and
+    the garbage collector runs it whenever it likes: once in the middle of another
+    renderer's frame, whose GL calls then failed (CI: glBindBuffer, invalid operation).
+    Here the collector runs at every allocation while the dropped one is garbage."""
+    import gc
+
+    from facesim.spec import Spec
+
+    animation = simulate(Spec(frames=4, onset=1, aus={"AU12": 1.0}))
+    dropped = FaceRenderer.of(animation, RenderSettings(64, 64))
+    dropped.frame(animation, 3)
+    with FaceRenderer.of(animation, RenderSettings(64, 64)) as renderer:
+        expected = renderer.frame(animation, 3)
+        dropped.cycle = dropped  # garbage only the collector finds
+        del dropped
+        threshold = gc.get_threshold()
+        gc.set_threshold(1)
+        try:
+            frame = renderer.frame(animation, 3)
+        finally:
+            gc.set_threshold(*threshold)
+        gc.collect()
+        assert np.array_equal(frame, expected)
+
+
+def test_closing_one_renderer_leaves_another_drawing():
+    """Every EGL renderer of a process shares one display, and pyrender terminated it when
+    it deleted a renderer: closing one (`facesim sheet` nests a second face's renderer in
+    the first's) ended the other's context."""
+    from facesim.spec import Spec
+
+    animation = simulate(Spec(frames=4, onset=1, aus={"AU12": 1.0}))
+    with FaceRenderer.of(animation, RenderSettings(64, 64)) as kept:
+        expected = kept.frame(animation, 3)
+        with FaceRenderer.of(animation, RenderSettings(64, 64)) as inner:
+            assert np.array_equal(inner.frame(animation, 3), expected)
+        assert np.array_equal(kept.frame(animation, 3), expected)
+    with FaceRenderer.of(animation, RenderSettings(64, 64)) as again:  # and the display opens again after the last
+        assert np.array_equal(again.frame(animation, 3), expected)
