@@ -29,8 +29,8 @@ from numba import njit, prange
 from scipy.sparse import coo_matrix, csr_matrix
 
 from . import cache, mesh
-from .config import PARALLEL_OPTIONS
 from .bake import TILES, atlas_uv
+from .config import PARALLEL_OPTIONS
 from .head import Head
 from .mesh import FaceMesh, smooth_interpolation, unique_edges
 from .render import IRIS, PUPIL, SCLERA, SKIN, _rotation

@@ -24,10 +24,9 @@ flood fills and each muscle's region run on every core for a large mesh (``prang
 facesim.config.PARALLEL_FROM): a link term scatters by ``CHUNKS`` fixed slices of its
 links into buffers of their own, summed per vertex in slice order (``_gather_parts``), and
 the fills split the muscles by fixed slices (``_find_regions``), so the bits do not
-depend on the thread count. Inside a
-parallel loop every array is written through a local name: Numba 0.68 drops writes made
-there through a tuple's field (``forces.force[i] = ...``; measured), and takes no tuple
-nested in another (so ``Forces`` is flat).
+depend on the thread count. Inside a parallel loop every array is written through a local
+name: Numba 0.68 drops writes made there through a tuple's field (``forces.force[i] =
+...``; measured), and takes no tuple nested in another (so ``Forces`` is flat).
 
 A term adds, at the predicted positions X* (eq. 3.14), its force F_i and, where its force
 depends on X_i, the scalar stiffness K_i = Σ ∂F_i/∂X_i along the spring (the Σ g + Σ h of

@@ -13,12 +13,12 @@
    first moved aside, so the old output exists until the new one does.
 
 Any failure, Ctrl-C, SIGTERM or SIGHUP (an exception within :func:`handling_termination`)
-removes the temporary; a write the disk refuses is one line, not a traceback. A signal's exception can land inside library code that swallows it (a bare ``except``) or
-turns it into another error (ctypes, converting an OpenGL call's arguments): so the
-signal is also recorded, :func:`check_terminated` raises it again at facesim's own
-checkpoints (each frame, and before anything is renamed into place), and
-:func:`terminating_signal` lets the command line report any error that follows it as the
-signal it was.
+removes the temporary; a write the disk refuses is one line, not a traceback. A signal's
+exception can land inside library code that swallows it (a bare ``except``) or turns it
+into another error (ctypes, converting an OpenGL call's arguments): so the signal is also
+recorded, :func:`check_terminated` raises it again at facesim's own checkpoints (each
+frame, and before anything is renamed into place), and :func:`terminating_signal` lets the
+command line report any error that follows it as the signal it was.
 """
 
 from __future__ import annotations
@@ -87,8 +87,9 @@ def terminating_signal() -> int | None:
 def check_terminated() -> None:
     """Raise :class:`Terminated` again if a signal arrived whose exception library code
     swallowed: the work stops here, not at the end with its output written."""
-    if _received:
-        raise Terminated(_received[0])
+    signum = terminating_signal()
+    if signum is not None:
+        raise Terminated(signum)
 
 
 def _is_facesim_output(path: Path, directory: bool, names: frozenset | None = None) -> bool:
