@@ -41,6 +41,7 @@ MOUTH_SOCKET = (0.30, 0.08, 0.09, 1.0)
 GUMS = (0.72, 0.36, 0.38, 1.0)
 TEETH = (0.93, 0.91, 0.84, 1.0)
 LASHES = (0.22, 0.16, 0.12, 1.0)
+BROWS = (0.22, 0.16, 0.12, 1.0)
 CARUNCLE = (0.78, 0.50, 0.48, 1.0)
 
 #: ICT's parts drawn, with the colour (None: per vertex, see head_figure) and roughness of
@@ -191,6 +192,44 @@ def _lip_colour(x: np.ndarray, head: Head, rows: np.ndarray) -> np.ndarray:
     return np.where(inside, np.clip(edge / 0.15, 0.0, 1.0) * 0.5 + 0.5, 0.0) * (edge < 3)
 
 
+#: The eyebrows: MediaPipe's upper brow contour from the tail to the head of the brow,
+#: then its lower contour back (the face's right brow, then its left).
+BROW_OUTLINES = ([70, 63, 105, 66, 107, 55, 65, 52, 53, 46], [300, 293, 334, 296, 336, 285, 295, 282, 283, 276])
+#: How much of the brows' colour their skin takes at most; how far (cm) the brow reaches
+#: outside MediaPipe's outline (which hugs a brow's densest hair) and the width over which
+#: it fades out there; the brow's head (toward the nose) takes BROW_HEAD of it.
+BROW_DENSITY, BROW_MARGIN, BROW_EDGE, BROW_HEAD = 0.9, 0.12, 0.15, 0.65
+
+
+def _distance_to_outline(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """(k,) each 2D point's distance to the closed polygon's (n, 2) edges."""
+    a, b = polygon, np.roll(polygon, -1, axis=0)
+    ab = b - a
+    t = np.clip(((points[:, None] - a) * ab).sum(axis=2) / (ab * ab).sum(axis=1), 0.0, 1.0)
+    return np.linalg.norm(points[:, None] - (a + t[:, :, None] * ab), axis=2).min(axis=1)
+
+
+def _brow_colour(x: np.ndarray, head: Head, rows: np.ndarray) -> np.ndarray:
+    """(k,) how much of the brows' colour each skin vertex takes: MediaPipe's brow outline
+    on this head and BROW_MARGIN around it, fading out over BROW_EDGE, lighter toward the
+    brow's head. A
+    bald clay head reads its brows' motion (AU1, AU2, AU4) only from their colour, which
+    rides the skin as the lips' does."""
+    density = np.zeros(len(rows))
+    for ring in BROW_OUTLINES:
+        outline = head.landmark_positions[ring]
+        front = x[rows, 2] > outline[:, 2].min() - 1.0
+        inside = _inside_polygon(x[rows, :2], outline[:, :2])
+        edge = _distance_to_outline(x[rows, :2], outline[:, :2])
+        tail, brow_head = outline[0, 0], outline[4, 0]
+        along = np.clip((x[rows, 0] - brow_head) / (tail - brow_head), 0.0, 1.0)  # 0 at the head, 1 at the tail
+        taper = BROW_HEAD + (1.0 - BROW_HEAD) * np.minimum(along / 0.3, 1.0)
+        signed = np.where(inside, -edge, edge)  # cm outside the outline
+        fade = np.clip((BROW_MARGIN - signed) / BROW_EDGE, 0.0, 1.0) * front
+        density = np.maximum(density, fade * taper * BROW_DENSITY)
+    return density
+
+
 def _face_follow(head: Head) -> np.ndarray:
     """(9409, 468) biharmonic weights of the face area on the landmarks' vertices."""
     face = FaceMesh(head.neutral[: head.face_count], head.triangles_of("M_Face"))
@@ -294,6 +333,8 @@ def head_figure(head: Head, model) -> Figure:
     colour = np.tile(np.array(SKIN), (len(x), 1))
     lips = _lip_colour(x, head, np.arange(n_face))
     colour[:n_face] = (1 - lips[:, None]) * np.array(SKIN) + lips[:, None] * np.array(LIPS)
+    brows = _brow_colour(x, head, np.arange(n_face))[:, None]
+    colour[:n_face] = (1 - brows) * colour[:n_face] + brows * np.array(BROWS)
     colour[mouth] = MOUTH_SOCKET
     for side in ("left", "right"):
         colour[head.part(f"eye_socket_{side}")] = CARUNCLE

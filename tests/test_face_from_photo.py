@@ -67,20 +67,22 @@ def aligned_rms(a, b):
     return float(np.sqrt(((s * a @ r.T + t - b) ** 2).sum(axis=1).mean()))
 
 
-def test_fit_comes_closer_to_a_known_head_than_the_generic_one(tmp_path):
-    """Identity seed 7 rendered in the clay look as a photo: the fitted head is nearer the
-    seed-7 head than ICT's generic head is (after a similarity). Measured: 0.208 cm RMS
-    over the whole head against the generic head's 0.264. The issue's bound, 0.2, is not
-    reached: MediaPipe's landmarks on these renders lie about 0.11 cm (0.8% of the face's
-    width) from their true places, an error particular to each face (flipping or rescaling
-    the image leaves it), and the same fit to the exact landmarks reaches 0.158."""
+def test_fit_recovers_a_known_head(tmp_path):
+    """Identity seed 7 rendered in the clay look as a photo: the fitted neutral head is
+    within the issue's 0.2 cm RMS of the seed-7 head over the whole head (after a
+    similarity), and nearer it than ICT's generic head is. Measured: 0.195 cm against the
+    generic head's 0.264. It was 0.208 while the clay head had no eyebrows: MediaPipe then
+    guessed the brows' ten points on bare skin (facesim.figure.BROW_OUTLINES); over seeds
+    0-20 the mean went 0.377 -> 0.374 cm with the brows painted. The same fit to the exact
+    landmarks reaches 0.158: what is left is MediaPipe's error on each face."""
     photo = tmp_path / "seed7.png"
     iio.imwrite(photo, render_head(7))
     fit = fitted(photo)
     truth = load_head(HEAD, 7).vertices
     generic = aligned_rms(load_head(HEAD).vertices, truth)
     ours = aligned_rms(load_head(HEAD, list(fit.identity)).vertices, truth)
-    assert ours < generic - 0.01
+    assert ours < 0.2
+    assert ours < generic - 0.05
 
 
 def test_face_directory(tmp_path, photos):

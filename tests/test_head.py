@@ -225,3 +225,32 @@ def test_closing_one_renderer_leaves_another_drawing():
         assert np.array_equal(kept.frame(animation, 3), expected)
     with FaceRenderer.of(animation, RenderSettings(64, 64)) as again:  # and the display opens again after the last
         assert np.array_equal(again.frame(animation, 3), expected)
+
+
+def _brow_row(image: np.ndarray, column: int, rows: slice) -> int:
+    """The darkest row of a brow's column band (5 pixels wide) within ``rows``."""
+    luminance = image[rows, column - 2:column + 3, :3].astype(float).mean(axis=(1, 2))
+    return rows.start + int(np.argmin(luminance))
+
+
+def test_the_clay_head_has_eyebrows_that_ride_the_skin():
+    """A bald clay head's brows read only from their colour (facesim.figure._brow_colour):
+    they show darker than the forehead, and AU1 + AU2 raise them on the picture as far as
+    the skin under them rises."""
+    raised = simulate(spec("happy", activations={}, aus={"AU1": 1.0, "AU2": 1.0}))
+    head = raised.model.mesh.head
+    brow = head.landmark_positions[[105, 52]].mean(axis=0)  # the right brow's middle, between its contours
+    forehead = head.landmark_positions[151]
+    with FaceRenderer.of(raised, RenderSettings(512, 512)) as renderer:
+        rest, apex = renderer.render(raised.rest), renderer.render(raised.positions[-1])
+        (bx, by), (fx, fy) = renderer.project(np.array([brow, forehead])).round().astype(int)
+        lift = raised.positions[-1] - raised.rest
+        brow_vertex = int(np.argmin(np.linalg.norm(raised.rest - brow, axis=1)))
+        risen = renderer.project(np.array([brow + lift[brow_vertex]]))[0, 1]
+    skin = rest[fy - 2:fy + 3, fx - 2:fx + 3, :3].astype(float).mean()
+    assert rest[by - 2:by + 3, bx - 2:bx + 3, :3].astype(float).mean() < 0.75 * skin
+    band = slice(by - 40, by + 20)
+    before, after = _brow_row(rest, bx, band), _brow_row(apex, bx, band)
+    assert abs(before - by) <= 4  # the dark band lies where the brow's points project
+    assert after < before - 3  # and it rises with the skin: about as far as the brow's vertex
+    assert abs((before - after) - (by - risen)) <= 4
