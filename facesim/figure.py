@@ -218,15 +218,19 @@ def _brow_colour(x: np.ndarray, head: Head, rows: np.ndarray) -> np.ndarray:
     density = np.zeros(len(rows))
     for ring in BROW_OUTLINES:
         outline = head.landmark_positions[ring]
-        front = x[rows, 2] > outline[:, 2].min() - 1.0
-        inside = _inside_polygon(x[rows, :2], outline[:, :2])
-        edge = _distance_to_outline(x[rows, :2], outline[:, :2])
+        reach = BROW_MARGIN + BROW_EDGE
+        near = np.flatnonzero((np.abs(x[rows, :2] - outline[:, :2].mean(axis=0))
+                               <= np.ptp(outline[:, :2], axis=0) / 2 + reach).all(axis=1))  # the outline's box
+        points = x[rows[near]]
+        inside = _inside_polygon(points[:, :2], outline[:, :2])
+        edge = _distance_to_outline(points[:, :2], outline[:, :2])
         tail, brow_head = outline[0, 0], outline[4, 0]
-        along = np.clip((x[rows, 0] - brow_head) / (tail - brow_head), 0.0, 1.0)  # 0 at the head, 1 at the tail
+        along = np.clip((points[:, 0] - brow_head) / (tail - brow_head), 0.0, 1.0)  # 0 at the head, 1 at the tail
         taper = BROW_HEAD + (1.0 - BROW_HEAD) * np.minimum(along / 0.3, 1.0)
         signed = np.where(inside, -edge, edge)  # cm outside the outline
+        front = points[:, 2] > outline[:, 2].min() - 1.0
         fade = np.clip((BROW_MARGIN - signed) / BROW_EDGE, 0.0, 1.0) * front
-        density = np.maximum(density, fade * taper * BROW_DENSITY)
+        density[near] = np.maximum(density[near], fade * taper * BROW_DENSITY)
     return density
 
 
