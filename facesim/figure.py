@@ -41,7 +41,7 @@ MOUTH_SOCKET = (0.30, 0.08, 0.09, 1.0)
 GUMS = (0.72, 0.36, 0.38, 1.0)
 TEETH = (0.93, 0.91, 0.84, 1.0)
 LASHES = (0.22, 0.16, 0.12, 1.0)
-BROWS = (0.22, 0.16, 0.12, 1.0)
+BROWS = LASHES  # the same hair
 CARUNCLE = (0.78, 0.50, 0.48, 1.0)
 
 #: ICT's parts drawn, with the colour (None: per vertex, see head_figure) and roughness of
@@ -212,13 +212,12 @@ def _distance_to_outline(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
 def _brow_colour(x: np.ndarray, head: Head, rows: np.ndarray) -> np.ndarray:
     """(k,) how much of the brows' colour each skin vertex takes: MediaPipe's brow outline
     on this head and BROW_MARGIN around it, fading out over BROW_EDGE, lighter toward the
-    brow's head. A
-    bald clay head reads its brows' motion (AU1, AU2, AU4) only from their colour, which
-    rides the skin as the lips' does."""
+    brow's head. A bald clay head reads its brows' motion (AU1, AU2, AU4) only from their
+    colour, which rides the skin as the lips' does."""
     density = np.zeros(len(rows))
+    reach = BROW_MARGIN + BROW_EDGE
     for ring in BROW_OUTLINES:
         outline = head.landmark_positions[ring]
-        reach = BROW_MARGIN + BROW_EDGE
         near = np.flatnonzero((np.abs(x[rows, :2] - outline[:, :2].mean(axis=0))
                                <= np.ptp(outline[:, :2], axis=0) / 2 + reach).all(axis=1))  # the outline's box
         points = x[rows[near]]
