@@ -54,7 +54,7 @@ ModelArrays = namedtuple("ModelArrays", [
     "muscle_kind", "muscle_axes", "muscle_insertion", "muscle_centre_start", "muscle_centre_index",
     "muscle_cos_zone", "muscle_r", "muscle_r_max", "muscle_force", "muscle_protrusion", "rest_vertex_normal", "axis_x", "axis_z", "radius",
     "jaw_column", "jaw_weight", "jaw_hinge", "jaw_axis", "jaw_max", "lid_column", "lid_centre", "lid_delta",
-    "lid_raise_column", "lid_raise_delta", "drive_column", "drive_weight", "contact_upper", "contact_lower", "contact_gap",
+    "lid_raise_column", "lid_raise_delta", "drive_column", "drive_weight", "contact_upper", "contact_lower", "contact_normal", "contact_gap",
     "mass", "damping", "stiffness", "nonlinearity", "repulsion_nonlinearity", "length_unit", "tissue", "drive",
     "bending", "edge_repulsion", "uv_projection", "attached_regions", "implicit", "iterations", "tolerance",
 ])
@@ -841,23 +841,34 @@ def _frame_point(x, i, axis_x, axis_z, radius, uv_projection, out):
 @njit(**NUMBA_OPTIONS)
 def _contacts(model, state):
     """Lips and lids do not pass through each other: each pair (upper, lower) is kept at
-    least its gap apart vertically, by moving both half the overlap and giving them their
-    mean vertical velocity (an inelastic contact; a single-layer mesh has no collisions)."""
+    least its gap apart along its contact normal n (straight up for the lids, turned back
+    for the lips: facesim.rig), by moving both half the overlap along n and giving them
+    their mean velocity along n (an inelastic contact; a single-layer mesh has no
+    collisions). Across n they slide freely."""
     x, v, pinned = state.x, state.v, model.pinned
     for k in range(model.contact_upper.shape[0]):
         u = model.contact_upper[k]
         l = model.contact_lower[k]
-        overlap = model.contact_gap[k] - (x[u, 1] - x[l, 1])
+        n = model.contact_normal[k]
+        overlap = model.contact_gap[k]
+        for d in range(3):
+            overlap -= n[d] * (x[u, d] - x[l, d])
         if overlap <= 0.0:
             continue
         share_u = 0.0 if pinned[u] else (1.0 if pinned[l] else 0.5)
         share_l = 0.0 if pinned[l] else 1.0 - share_u
-        x[u, 1] += share_u * overlap
-        x[l, 1] -= share_l * overlap
-        if v[u, 1] < v[l, 1]:
-            mean = 0.5 * (v[u, 1] + v[l, 1])
-            v[u, 1] = 0.0 if pinned[u] else mean
-            v[l, 1] = 0.0 if pinned[l] else mean
+        vn_u = 0.0
+        vn_l = 0.0
+        for d in range(3):
+            x[u, d] += share_u * overlap * n[d]
+            x[l, d] -= share_l * overlap * n[d]
+            vn_u += n[d] * v[u, d]
+            vn_l += n[d] * v[l, d]
+        if vn_u < vn_l:
+            mean = 0.5 * (vn_u + vn_l)
+            for d in range(3):
+                v[u, d] += ((0.0 if pinned[u] else mean) - vn_u) * n[d]
+                v[l, d] += ((0.0 if pinned[l] else mean) - vn_l) * n[d]
 
 
 @njit(**NUMBA_OPTIONS)

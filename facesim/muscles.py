@@ -106,10 +106,15 @@ class Jaw(_Contours):
     temporomandibular joints), ``max_angle`` degrees at activation 1. ``lower`` points
     follow it fully, ``upper`` points stay with the skull; the rest of the face follows
     with a weight interpolated smoothly between them (facesim.rig). The two lists pair
-    up, upper over lower: the lips' contacts."""
+    up, upper over lower: the lips' contacts, which meet across a plane turned
+    ``contact_tilt`` degrees from the horizontal, its normal leaning back (facesim.rig):
+    the lower lip pushed up slides forward over the upper one."""
 
     hinge: tuple[Point, Point]
     max_angle: float = Field(20.0, gt=0, le=45)
+    contact_tilt: float = Field(0.0, ge=0, lt=90, description="degrees the plane the closed lips meet across "
+                                "turns from the horizontal, its front edge up (0: the upper lip only ever above the "
+                                "lower); 50 matches ICT's chin raiser and lip press on the default head (REALISM.md)")
 
 
 class Eyelid(_Contours):
@@ -193,12 +198,13 @@ LINEAR, SPHINCTER = 0, 1
 @dataclass(frozen=True)
 class JawRig:
     """The jaw resolved onto a mesh: hinge (2, 3) points in cm, lower/upper vertex indices,
-    max_angle in radians."""
+    max_angle and the lips' contact_tilt in radians."""
 
     hinge: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
     max_angle: float
+    contact_tilt: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -361,7 +367,7 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         upper = np.array([_snap(p, mesh, f"{where}: upper") for p in spec.jaw.upper], dtype=np.int64)
         lower = np.array([_snap(p, mesh, f"{where}: lower", below=u) for p, u in zip(spec.jaw.lower, upper)], dtype=np.int64)
         _upper_over_lower(mesh, upper, lower, where)
-        jaw = JawRig(hinge, lower, upper, float(np.radians(spec.jaw.max_angle)))
+        jaw = JawRig(hinge, lower, upper, float(np.radians(spec.jaw.max_angle)), float(np.radians(spec.jaw.contact_tilt)))
         controls.append("jaw")
     eyelids = []
     for lid in spec.eyelids:

@@ -30,7 +30,14 @@ acting on top.
 
 The jaw's lip lists and the lid contours are paired in order; each pair is also a contact
 (``kernels._contacts``): the upper vertex never drops below its lower partner, so a
-sphincter pressing the lips together, or a closing lid, stops where they meet.
+sphincter pressing the lips together, or a closing lid, stops where they meet. "Below"
+is along the pair's contact normal: straight up for the lids; for the lips, turned back
+by the jaw's ``contact_tilt``, since closed lips meet across an inclined plane and a
+lower lip pushed up (the chin raiser, AU17; the lip press, AU24) slides forward over the
+upper one rather than lifting it. ICT's scans measure that plane: over its action units
+the lower lip's travel against the upper one keeps to one side of a plane turned about
+50 degrees (every unit but the dimpler, AU14, by 1.5 mm), where a horizontal one is
+crossed by 6.6 mm under AU17 and 2.5 mm under AU24.
 
 The eyeball (centre and radius from the eye opening) is the same one the renderer draws.
 """
@@ -87,8 +94,10 @@ class Rig:
     (n, 3) (Δx, Δφ, Δr) at the levator's full activation; drive_column : (n,) the control
     whose activation drives the vertex to its target (the lips: the jaw; the lid contours:
     their eyelid), -1 for none; drive_weight : (n,) its share of ``Material.drive``;
-    contact_upper, contact_lower, contact_gap : (k,) the lip and lid pairs that may not
-    pass through each other, and the least vertical gap each keeps.
+    contact_upper, contact_lower : (k,) the lip and lid pairs that may not pass through
+    each other; contact_normal : (k, 3) the direction the upper one keeps above the lower
+    (the lids: straight up; the lips: turned back by the jaw's ``contact_tilt``);
+    contact_gap : (k,) the least gap each keeps along it.
     """
 
     jaw_column: int
@@ -105,6 +114,7 @@ class Rig:
     drive_weight: np.ndarray
     contact_upper: np.ndarray
     contact_lower: np.ndarray
+    contact_normal: np.ndarray
     contact_gap: np.ndarray
 
 
@@ -238,13 +248,13 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
             lid_raise_delta[region_free] = raised[keep]
         drive_column[contour] = muscles.index(lid.name)
         drive_weight[contour] = 1.0
-    upper = [muscles.jaw.upper] if muscles.jaw is not None else []
-    lower = [muscles.jaw.lower] if muscles.jaw is not None else []
-    upper += [lid.upper for lid in muscles.eyelids]
-    lower += [lid.lower for lid in muscles.eyelids]
-    upper = np.concatenate(upper) if upper else np.zeros(0, dtype=np.int64)
-    lower = np.concatenate(lower) if lower else np.zeros(0, dtype=np.int64)
-    gap = np.minimum(CONTACT_GAP, mesh.vertices[upper, 1] - mesh.vertices[lower, 1])
+    parts = ([(muscles.jaw.upper, muscles.jaw.lower, muscles.jaw.contact_tilt)] if muscles.jaw is not None else [])
+    parts += [(lid.upper, lid.lower, 0.0) for lid in muscles.eyelids]
+    upper = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, dtype=np.int64)
+    lower = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, dtype=np.int64)
+    normal = np.concatenate([np.tile([0.0, np.cos(tilt), -np.sin(tilt)], (len(up), 1)) for up, _, tilt in parts]) \
+        if parts else np.zeros((0, 3))
+    gap = np.minimum(CONTACT_GAP, np.einsum("kd,kd->k", mesh.vertices[upper] - mesh.vertices[lower], normal))
     return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, lid_column, lid_centre, lid_delta, lid_raise_column,
                lid_raise_delta, drive_column, drive_weight,
-               upper, lower, gap)
+               upper, lower, normal, gap)

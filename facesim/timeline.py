@@ -92,13 +92,13 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     "AU17": ("chin raiser", {"mentalis": 1.0}),
     "AU18": ("lip pucker", {"incisivus_labii": 1.0}),
     "AU20": ("lip stretcher", {"risorius": 1.0}),
-    "AU22": ("lip funneler", {"incisivus_labii": 1.0, "depressor_labii_inferioris": 0.3, "levator_labii_superioris": 0.3}),
+    "AU22": ("lip funneler", {"incisivus_labii": 1.0, "depressor_labii_inferioris": 0.5, "levator_labii_superioris": 0.4}),
     "AU23": ("lip tightener", {"orbicularis_oris": 0.8}),
     # ICT's lip press (mouthPress) is more than the ring: the chin and lower lip rise 3-5 mm
     # and come forward, the upper lip comes down 1 mm, the corners in a little. The ring
     # alone moved the skin nearly at right angles to it (cosine 0.34): half the chin
     # raiser, the pucker's incisivi and the buccinator with it reach 0.68 (REALISM.md)
-    "AU24": ("lip pressor", {"mentalis": 0.5, "orbicularis_oris": 0.3, "buccinator": 0.2, "incisivus_labii": 0.25}),
+    "AU24": ("lip pressor", {"mentalis": 0.4, "orbicularis_oris": 0.27, "buccinator": 0.15}),
     "AU26": ("jaw drop", {"jaw": 0.5}),
     "AU27": ("mouth stretch", {"jaw": 1.0}),
     "AU43": ("eyes closed", {"eyelid": 1.0}),

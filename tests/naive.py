@@ -248,21 +248,21 @@ def step(model, x, v, activation, h):
 
 
 def contacts(model, x, v):
-    """Each lip and lid pair (upper, lower) kept its gap apart vertically; both share the
-    correction (a pinned one keeps still) and their mean vertical velocity."""
+    """Each lip and lid pair (upper, lower) kept its gap apart along its contact normal n;
+    both share the correction (a pinned one keeps still) and their mean velocity along n."""
     x, v = x.copy(), v.copy()
     rig = model.rig
-    for u, l, gap in zip(rig.contact_upper, rig.contact_lower, rig.contact_gap):
-        overlap = gap - (x[u, 1] - x[l, 1])
+    for u, l, n, gap in zip(rig.contact_upper, rig.contact_lower, rig.contact_normal, rig.contact_gap):
+        overlap = gap - n @ (x[u] - x[l])
         if overlap <= 0:
             continue
         moving = [k for k in (u, l) if not model.pinned[k]]
         for k in moving:
-            x[k, 1] += (1 if k == u else -1) * overlap / len(moving)
-        if v[u, 1] < v[l, 1]:
-            mean = (v[u, 1] + v[l, 1]) / 2
+            x[k] += (1 if k == u else -1) * overlap / len(moving) * n
+        if n @ v[u] < n @ v[l]:
+            mean = (n @ v[u] + n @ v[l]) / 2
             for k in (u, l):
-                v[k, 1] = mean if not model.pinned[k] else 0.0
+                v[k] += ((mean if not model.pinned[k] else 0.0) - n @ v[k]) * n
     return x, v
 
 

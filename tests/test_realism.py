@@ -25,7 +25,7 @@ from facesim.timeline import ACTION_UNITS
 
 DATA = Path(__file__).parent / "data" / "ict_action_units.npz"
 #: Units within the bounds on the default head (REALISM.md).
-CALIBRATED = {"AU1", "AU2", "AU4", "AU5", "AU6", "AU7", "AU9", "AU10", "AU11", "AU12", "AU14", "AU15", "AU16", "AU18", "AU20", "AU22", "AU26", "AU27", "AU45"}
+CALIBRATED = {"AU1", "AU2", "AU4", "AU5", "AU6", "AU7", "AU9", "AU10", "AU11", "AU12", "AU14", "AU15", "AU16", "AU17", "AU18", "AU20", "AU22", "AU26", "AU27", "AU45"}
 
 
 @pytest.fixture(scope="module")
@@ -95,3 +95,32 @@ def test_a_muscles_push_moves_the_skin_off_its_surface_as_far_as_icts(au, muscle
         cosine[name] = compare(on_face(figure, held.displacement), ict[au]).cosine
     assert 0.75 < depth["pushed"] < 1.25 and depth["flat"] < 0.5
     assert cosine["pushed"] >= COSINE and cosine["pushed"] > cosine["flat"] + 0.05
+
+
+def test_a_lower_lip_pushed_up_slides_forward_over_the_upper_one(head_model):
+    """ICT's chin raiser (AU17) moves the inner lower lip 6.9 mm up and 5.5 mm forward
+    and leaves the upper lip still: the lower lip slides up the upper one's front rather
+    than lifting it. The lips' contact keeps each pair apart across a plane turned
+    ``contact_tilt`` degrees (facesim.rig): under AU17 the pair's relative motion lies in
+    that plane, and the upper lip rises less than half as far as across a horizontal one,
+    which the lower lip can only lift."""
+    import yaml
+
+    from facesim.config import HEAD_MUSCLES
+    from facesim.model import build_model
+    from facesim.muscles import MuscleFile, resolve_muscles
+
+    raw = yaml.safe_load(HEAD_MUSCLES.read_text())
+    tilt = np.radians(raw["jaw"]["contact_tilt"])
+    assert raw["jaw"]["contact_tilt"] > 0
+    raw["jaw"]["contact_tilt"] = 0.0
+    material = Spec.model_validate(dict(name="neutral", frames=1)).material
+    flat = build_model(head_model.mesh, resolve_muscles(MuscleFile.model_validate(raw), head_model.mesh), material)
+    upper, lower = 13, 14  # the inner lips' middle, a contact pair
+    figure = figure_for(head_model)
+    tilted, level = (hold(model, "AU17", figure=figure).displacement for model in (head_model, flat))
+    relative = tilted[lower] - tilted[upper]
+    slide = np.array([0.0, np.sin(tilt), np.cos(tilt)])  # up the plane, forward
+    assert relative @ slide > 0.95 * np.linalg.norm(relative) and relative[1] > 0.5  # cm
+    assert tilted[lower, 1] > 0.6 and tilted[lower, 2] > 0.3
+    assert tilted[upper, 1] < 0.5 * level[upper, 1]
