@@ -92,12 +92,16 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     "AU17": ("chin raiser", {"mentalis": 1.0}),
     "AU18": ("lip pucker", {"incisivus_labii": 1.0}),
     "AU20": ("lip stretcher", {"risorius": 1.0}),
+    # the funnel's lips drawn apart by the lower lip depressor and the upper lip raiser,
+    # weighted so as ICT's funnel (0.82) with the lips' inclined contact
     "AU22": ("lip funneler", {"incisivus_labii": 1.0, "depressor_labii_inferioris": 0.5, "levator_labii_superioris": 0.4}),
     "AU23": ("lip tightener", {"orbicularis_oris": 0.8}),
     # ICT's lip press (mouthPress) is more than the ring: the chin and lower lip rise 3-5 mm
     # and come forward, the upper lip comes down 1 mm, the corners in a little. The ring
-    # alone moved the skin nearly at right angles to it (cosine 0.34): half the chin
-    # raiser, the pucker's incisivi and the buccinator with it reach 0.68 (REALISM.md)
+    # alone moved the skin nearly at right angles to it (cosine 0.34). With 0.4 of the
+    # chin raiser and a little of the buccinator, weights searched with the mentalis
+    # (scripts/calibrate.py AU17 --also AU24), it reaches 0.77 (REALISM.md): the chin
+    # raiser's forward push carries the chin 6 mm forward where ICT's press moves it 2.
     "AU24": ("lip pressor", {"mentalis": 0.4, "orbicularis_oris": 0.27, "buccinator": 0.15}),
     "AU26": ("jaw drop", {"jaw": 0.5}),
     "AU27": ("mouth stretch", {"jaw": 1.0}),

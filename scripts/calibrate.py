@@ -19,7 +19,7 @@ must not pin the skin other units move.
 
 A muscle with a ``protrusion`` has its size searched too (its log, the sign the file's,
 with the force and falloff). What the head's file holds came from runs of this script
-(REALISM.md: 19 of 21 within the bounds). The pucker's ring (AU18) was searched held over the fold tests' 200
+(REALISM.md: 20 of 21 within the bounds). The pucker's ring (AU18) was searched held over the fold tests' 200
 frames, with the pairs it fluttered in most joining the loss (``--frames 200 --pairs
 AU18+AU23,AU18+AU24,AU12+AU18,AU18+AU22``; held that long, trials are scored by the fold
 tests' rest and an amplitude kept within 0.85-1.25): held 80 frames, a stronger ring

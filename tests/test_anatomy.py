@@ -61,9 +61,18 @@ def test_a_sphincter_pulls_its_ring_toward_its_centre_and_stays_symmetric(model,
 
 
 def test_the_lips_do_not_pass_through_each_other_under_the_sphincter(model):
+    """The sphincter presses the lips together until they meet; each pair then stays its
+    gap apart across the plane the lips meet along (its contact normal, facesim.rig)."""
     positions, *_ = run(model, ramp_table(model, 40, orbicularis_oris=rise(40, 10)), 0.01)
+    a = model.arrays
+    pairs = {(int(u), int(l)): k for k, (u, l) in enumerate(zip(a.contact_upper, a.contact_lower))}
+    met = 0
     for upper, lower in LIP_PAIRS:
-        assert np.all(positions[:, upper, 1] > positions[:, lower, 1])
+        k = pairs[(upper, lower)]
+        apart = (positions[:, upper] - positions[:, lower]) @ a.contact_normal[k]
+        assert np.all(apart >= a.contact_gap[k] - 1e-9)
+        met += apart.min() < a.contact_gap[k] + 1e-6
+    assert met >= len(LIP_PAIRS) // 2  # pressed into contact, not merely never near
 
 
 def test_a_20_degree_jaw_opening_parts_the_lips_without_inverting_and_closes_again(model):
