@@ -19,16 +19,21 @@ must not pin the skin other units move.
 
 A muscle with a ``protrusion`` has its size searched too (its log, the sign the file's,
 with the force and falloff). What the head's file holds came from runs of this script
-(REALISM.md: 20 of 21 within the bounds). The pucker's ring (AU18) was searched held over the fold tests' 200
+(REALISM.md: 21 of 21 within the bounds). The pucker's ring (AU18) was searched held over the fold tests' 200
 frames, with the pairs it fluttered in most joining the loss (``--frames 200 --pairs
 AU18+AU23,AU18+AU24,AU12+AU18,AU18+AU22``; held that long, trials are scored by the fold
 tests' rest and an amplitude kept within 0.85-1.25): held 80 frames, a stronger ring
 looked settled, and at 200 its lips chattered against their contact, alone and in 12
 pairs. Re-run from the file's values, that search keeps them (loss 0.414).
 
-The chin raiser's mentalis (AU17) is shared with the lip press (AU24, half of it): it
-was searched with the press's loss joining its own (``AU17 --no-place --frames 200
---also AU24``).
+The chin raiser's muscles (AU17: the mentalis and the lower incisivi) are shared with the
+lip press (AU24): ``--also AU24`` joins the press's loss to the raiser's. What the file
+holds came from a joint Nelder-Mead of the two units' losses over the lower incisivi's
+force, falloff, zone and push and AU24's weights (facesim.timeline), held 200 frames,
+with the mentalis searched before without its push (2026-12-02: AU17 0.89, AU24 0.81);
+the lower incisivi's placement (insertion on the lower lip at landmark 85, attachment
+at the mentalis's insertion, 201, where the incisive fossa lies under the skin) was
+the better of two tried (from 84 toward 167: 0.85 and 0.77).
 
 Usage: ``python scripts/calibrate.py [AU ...] [--evaluations N] [--frames N] [--pairs
 AU+AU,...] [--also AU,...] [--no-place] [--min-zone DEGREES] [--write]``.

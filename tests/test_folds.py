@@ -9,14 +9,14 @@ energy at the end below 1e-6 of its peak, or one named mode that is bounded.
 Folds: none, for every unit alone, every pair and every expression of the library
 (measured at k_b = 100). At rest: every unit alone and every expression of the library.
 
-Not at rest within 200 frames: 16 of the 188 pairs (measured 2026-12-02, with the lips'
-inclined contact), 8 of them with the pucker (AU18) or the funnel (AU22, the pucker's
-ring with the lips parted). The mode is a flutter of the back-projected muscle force
+Not at rest within 200 frames: 12 of the 274 pairs (measured 2026-12-02, with the lips'
+inclined contact and the lower incisivi), 8 of them with the pucker (AU18) or the funnel
+(AU22, the pucker's ring with the lips parted). The mode is a flutter of the back-projected muscle force
 (eq. 3.22-3.25, which is not conservative: the triangle a vertex's 2D force is carried
 back onto changes as the vertex moves, so the force does work around a closed path) where
 two units' regions overlap at the lips, the base of the nose or, for AU12 + AU20, the
 cheek where the two lip-corner pullers meet: the largest AU12 + AU20, 0.24 mm a frame and
-9.3e-4 of its peak kinetic energy; the others 0.002-0.12 mm. It is a limit cycle, not a
+9.3e-4 of its peak kinetic energy; the others 0.006-0.11 mm. It is a limit cycle, not a
 runaway: held 400 frames, each pair's kinetic energy over its last 100 frames peaks
 within a factor 2 of where it peaked over frames 100-200 (most to the digits shown;
 AU9 + AU23 wanders between 1.2e-4 and 3.3e-4 of its peak over 1,000 frames), as the

@@ -25,7 +25,7 @@ from facesim.timeline import ACTION_UNITS
 
 DATA = Path(__file__).parent / "data" / "ict_action_units.npz"
 #: Units within the bounds on the default head (REALISM.md).
-CALIBRATED = {"AU1", "AU2", "AU4", "AU5", "AU6", "AU7", "AU9", "AU10", "AU11", "AU12", "AU14", "AU15", "AU16", "AU17", "AU18", "AU20", "AU22", "AU26", "AU27", "AU45"}
+CALIBRATED = {"AU1", "AU2", "AU4", "AU5", "AU6", "AU7", "AU9", "AU10", "AU11", "AU12", "AU14", "AU15", "AU16", "AU17", "AU18", "AU20", "AU22", "AU24", "AU26", "AU27", "AU45"}
 
 
 @pytest.fixture(scope="module")
