@@ -248,12 +248,13 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
             lid_raise_delta[region_free] = raised[keep]
         drive_column[contour] = muscles.index(lid.name)
         drive_weight[contour] = 1.0
-    parts = ([(muscles.jaw.upper, muscles.jaw.lower, muscles.jaw.contact_tilt)] if muscles.jaw is not None else [])
+    # the contact pairs, upper over lower, and the tilt of the plane each part meets across
+    parts = [(muscles.jaw.upper, muscles.jaw.lower, muscles.jaw.contact_tilt)] if muscles.jaw is not None else []
     parts += [(lid.upper, lid.lower, 0.0) for lid in muscles.eyelids]
-    upper = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, dtype=np.int64)
-    lower = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, dtype=np.int64)
-    normal = np.concatenate([np.tile([0.0, np.cos(tilt), -np.sin(tilt)], (len(up), 1)) for up, _, tilt in parts]) \
-        if parts else np.zeros((0, 3))
+    upper = np.concatenate([np.zeros(0, dtype=np.int64)] + [up for up, _, _ in parts])
+    lower = np.concatenate([np.zeros(0, dtype=np.int64)] + [low for _, low, _ in parts])
+    normal = np.concatenate([np.zeros((0, 3))] + [np.tile([0.0, np.cos(tilt), -np.sin(tilt)], (len(up), 1))
+                                                 for up, _, tilt in parts])
     gap = np.minimum(CONTACT_GAP, np.einsum("kd,kd->k", mesh.vertices[upper] - mesh.vertices[lower], normal))
     return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, lid_column, lid_centre, lid_delta, lid_raise_column,
                lid_raise_delta, drive_column, drive_weight,

@@ -177,7 +177,7 @@ def test_validate_info_muscles_and_sheet(tmp_path):
     result = facesim("validate", *sorted(EXPRESSIONS.glob("*.yaml")), check=0)
     assert result.stdout.count("ok: ") == len(list(EXPRESSIONS.glob("*.yaml")))
     info = facesim("info", check=0).stdout
-    assert "468 vertices, 852 triangles" in info and "38 muscles (34 linear, 4 sphincter)" in info
+    assert "468 vertices, 852 triangles" in info and "40 muscles (36 linear, 4 sphincter)" in info
     assert "controls: jaw, eyelid_r, levator_palpebrae_r, eyelid_l, levator_palpebrae_l" in info
     assert "backend egl: ok" in info and "backend osmesa: ok" in info
     listing = facesim("muscles", "--plot", tmp_path / "m.png", check=0).stdout

@@ -116,7 +116,7 @@ def test_a_second_photo_gives_a_valid_mesh_that_carries_the_default_muscles(tmp_
     assert (loaded.face_normals[:, 2] > 0).mean() >= 0.95
     assert np.abs(loaded.vertices - mesh.vertices).max() < 1e-5
     muscles = load_muscles(HOPPER_MUSCLES, loaded)
-    assert muscles.count == 38 and muscles.controls == ("jaw", "eyelid_r", "levator_palpebrae_r", "eyelid_l", "levator_palpebrae_l")
+    assert muscles.count == 40 and muscles.controls == ("jaw", "eyelid_r", "levator_palpebrae_r", "eyelid_l", "levator_palpebrae_l")
 
 
 @needs_mediapipe
