@@ -47,9 +47,11 @@ def handled(command):
             except KeyboardInterrupt:
                 fail("interrupted; nothing was written", 130)
             except BaseException as exc:
-                # any error after SIGTERM or SIGHUP is the signal's: ctypes, for one, turns the
+                # any error after a signal is the signal's: ctypes, for one, turns the
                 # signal's exception into an ArgumentError when it lands while arguments convert
                 signum = exc.signum if isinstance(exc, Terminated) else terminating_signal()
+                if signum == signal.SIGINT:
+                    fail("interrupted; nothing was written", 130)
                 if signum is not None:
                     fail(f"stopped by {signal.Signals(signum).name}; nothing was written", 128 + signum)
                 if isinstance(exc, FacesimError):

@@ -60,17 +60,23 @@ _received: list[int] = []
 @contextmanager
 def handling_termination():
     """Within the block SIGTERM and SIGHUP raise :class:`Terminated` in the main thread,
-    and are recorded; the handlers before it, and an empty record, are restored after."""
-    signals = (signal.SIGTERM, signal.SIGHUP)
-    saved = {signum: signal.getsignal(signum) for signum in signals}
+    Ctrl-C (SIGINT, unless the process was started with it ignored) KeyboardInterrupt as
+    Python's own handler does, and each is recorded; the handlers before it, and an empty
+    record, are restored after. The record is what lets :func:`check_terminated` stop the
+    work when library code swallowed the exception (CI saw a render finish all 3,000
+    frames and exit 0 after its Ctrl-C)."""
+    saved = {signum: signal.getsignal(signum) for signum in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)}
 
     def raise_terminated(signum, _frame):
         _received.append(signum)
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
         raise Terminated(signum)
 
     _received.clear()
-    for signum in signals:
-        signal.signal(signum, raise_terminated)
+    for signum, handler in saved.items():
+        if signum != signal.SIGINT or handler is signal.default_int_handler:
+            signal.signal(signum, raise_terminated)
     try:
         yield
     finally:
@@ -80,14 +86,17 @@ def handling_termination():
 
 
 def terminating_signal() -> int | None:
-    """The first SIGTERM or SIGHUP received, or None."""
+    """The first SIGTERM, SIGHUP or SIGINT received, or None."""
     return _received[0] if _received else None
 
 
 def check_terminated() -> None:
-    """Raise :class:`Terminated` again if a signal arrived whose exception library code
-    swallowed: the work stops here, not at the end with its output written."""
+    """Raise :class:`Terminated` (KeyboardInterrupt for Ctrl-C) again if a signal arrived
+    whose exception library code swallowed: the work stops here, not at the end with its
+    output written."""
     signum = terminating_signal()
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
     if signum is not None:
         raise Terminated(signum)
 

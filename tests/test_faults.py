@@ -249,33 +249,56 @@ def test_sigterm_during_the_write_leaves_nothing(tmp_path):
 
 @pytest.fixture
 def own_signal_handlers():
-    """facesim's SIGTERM and SIGHUP handlers in this process, the test runner's restored after."""
+    """facesim's SIGTERM, SIGHUP and SIGINT handlers in this process (SIGINT's default
+    handler set first, as in a terminal: a test worker may run with it ignored), the test
+    runner's restored after."""
     from facesim.writers import handling_termination, terminating_signal
 
-    with handling_termination():
-        yield
-    assert terminating_signal() is None  # nothing recorded is left for the next test
-
-
-def swallowing_library(then=None):
-    """Library code that catches everything (a bare ``except``) while SIGTERM arrives."""
+    runner = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
-        os.kill(os.getpid(), signal.SIGTERM)
+        with handling_termination():
+            yield
+        assert terminating_signal() is None  # nothing recorded is left for the next test
+    finally:
+        signal.signal(signal.SIGINT, runner)
+
+
+def swallowing_library(then=None, signum=signal.SIGTERM):
+    """Library code that catches everything (a bare ``except``) while a signal arrives."""
+    try:
+        os.kill(os.getpid(), signum)
         time.sleep(1.0)
     except BaseException:
         if then is not None:
             raise then from None
 
 
-def test_a_signal_that_library_code_swallowed_still_leaves_nothing(tmp_path, own_signal_handlers):
-    """CI once saw a render go on to write all 400 frames, exit 0, after its SIGTERM."""
-    from facesim.writers import Terminated, atomic_path
+@pytest.mark.parametrize("signum, raised", [(signal.SIGTERM, "Terminated"), (signal.SIGINT, "KeyboardInterrupt")])
+def test_a_signal_that_library_code_swallowed_still_leaves_nothing(tmp_path, own_signal_handlers, signum, raised):
+    """CI once saw a render go on to write all 400 frames, exit 0, after its SIGTERM, and
+    another all 3,000 after its Ctrl-C."""
+    from facesim import writers
 
-    with pytest.raises(Terminated, match="SIGTERM"):
-        with atomic_path(tmp_path / "a.mp4") as tmp:
+    with pytest.raises(getattr(writers, raised, KeyboardInterrupt)):
+        with writers.atomic_path(tmp_path / "a.mp4") as tmp:
             tmp.write_bytes(b"....ftyp")
-            swallowing_library()
+            swallowing_library(signum=signum)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_swallowed_ctrl_c_is_reported_as_an_interruption(own_signal_handlers, capsys):
+    import typer
+
+    from facesim.cli import handled
+
+    @handled
+    def command():
+        swallowing_library(then=ValueError("argument 2: KeyboardInterrupt"), signum=signal.SIGINT)
+
+    with pytest.raises(typer.Exit) as stopped:
+        command()
+    assert stopped.value.exit_code == 130
+    assert capsys.readouterr().err == "facesim: error: interrupted; nothing was written\n"
 
 
 def test_an_error_a_signal_turned_into_is_reported_as_the_signal(own_signal_handlers, capsys):
