@@ -652,8 +652,13 @@ where a step's time goes.
   Multisampling costs more in llvmpipe (108 ms at 512² with 2 or 4 samples, measured on
   2026-12-01). Tried then: the skin drawn first, so that the depth test discards the
   teeth and mouth behind it, gains nothing measurable.
-- **3 s for `facesim render` in a fresh process: met since 2026-12-02.** Profiled that
-  day before the changes (3.0-3.5 s wall), in order: importing the command line 0.3 s;
+- **3 s for `facesim render` in a fresh process: met on a quiet machine, at its edge on a
+  busy one.** 2.79-2.83 s in two runs of 2026-12-02 and 3.05 s in a third that
+  afternoon, with the code of the second: the commits before and after that day's last
+  changes, run alternately, took 3.30 and 3.29 s (medians of 6), so the machine moved,
+  not the code. What would give it room: the model's arrays in the on-disk cache (the
+  model is 0.6 s of it) and the GL context made in a thread while the model builds (0.3
+  s). Profiled on 2026-12-02 before the changes below (3.0-3.5 s wall), in order: importing the command line 0.3 s;
   the model 0.6 s (with the imports of trimesh and SciPy it needs); the simulation 0.2 s
   (Numba's cached kernels loaded); the head's figure 0.06 s; the GL context and scene
   0.3 s; the 35 frames 1.2 s, encoding overlapped; then 0.3 s of the interpreter tearing
@@ -661,8 +666,7 @@ where a step's time goes.
   0.1 s importing matplotlib for one point-in-polygon test. facesim's command now
   leaves by os._exit once its threads are joined, its atexit handlers run and its
   streams flushed (facesim.cli.main), the lips' outline test is NumPy's, and the culled
-  back faces shorten the frames. Not needed then, and not built: the model's arrays in
-  the on-disk cache, the GL context made in a thread while the model builds.
+  back faces shorten the frames.
 - **50 ms for happy on the head.** Met on some machines of this kind and not on others:
   38 ms on 2026-12-02 (an Intel Xeon), 52 ms on 2026-12-01 (an AMD EPYC), where the
   Hopper face's same code took 22 and 35 ms. Side by side in one process (2026-12-01),
