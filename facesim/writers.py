@@ -69,9 +69,7 @@ def handling_termination():
 
     def raise_terminated(signum, _frame):
         _received.append(signum)
-        if signum == signal.SIGINT:
-            raise KeyboardInterrupt
-        raise Terminated(signum)
+        raise _exception_for(signum)
 
     _received.clear()
     for signum, handler in saved.items():
@@ -95,10 +93,14 @@ def check_terminated() -> None:
     whose exception library code swallowed: the work stops here, not at the end with its
     output written."""
     signum = terminating_signal()
-    if signum == signal.SIGINT:
-        raise KeyboardInterrupt
     if signum is not None:
-        raise Terminated(signum)
+        raise _exception_for(signum)
+
+
+def _exception_for(signum: int) -> BaseException:
+    """What a signal raises within :func:`handling_termination`: KeyboardInterrupt for
+    Ctrl-C, as Python's own handler does, :class:`Terminated` for the others."""
+    return KeyboardInterrupt() if signum == signal.SIGINT else Terminated(signum)
 
 
 def _is_facesim_output(path: Path, directory: bool, names: frozenset | None = None) -> bool:

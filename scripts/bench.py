@@ -658,8 +658,8 @@ where a step's time goes.
   changes, run alternately, took 3.30 and 3.29 s (medians of 6), so the machine moved,
   not the code. What would give it room: the model's arrays in the on-disk cache (the
   model is 0.6 s of it) and the GL context made in a thread while the model builds (0.3
-  s). Profiled on 2026-12-02 before the changes below (3.0-3.5 s wall), in order: importing the command line 0.3 s;
-  the model 0.6 s (with the imports of trimesh and SciPy it needs); the simulation 0.2 s
+  s). Profiled on 2026-12-02 before the changes below (3.0-3.5 s wall), in order:
+  importing the command line 0.3 s; the model 0.6 s (with the imports of trimesh and SciPy it needs); the simulation 0.2 s
   (Numba's cached kernels loaded); the head's figure 0.06 s; the GL context and scene
   0.3 s; the 35 frames 1.2 s, encoding overlapped; then 0.3 s of the interpreter tearing
   itself down (strace: no system call for 0.27 s after the last atexit handler), and

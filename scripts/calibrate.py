@@ -19,12 +19,12 @@ must not pin the skin other units move.
 
 A muscle with a ``protrusion`` has its size searched too (its log, the sign the file's,
 with the force and falloff). What the head's file holds came from runs of this script
-(REALISM.md: 21 of 21 within the bounds). The pucker's ring (AU18) was searched held over the fold tests' 200
-frames, with the pairs it fluttered in most joining the loss (``--frames 200 --pairs
-AU18+AU23,AU18+AU24,AU12+AU18,AU18+AU22``; held that long, trials are scored by the fold
-tests' rest and an amplitude kept within 0.85-1.25): held 80 frames, a stronger ring
-looked settled, and at 200 its lips chattered against their contact, alone and in 12
-pairs. Re-run from the file's values, that search keeps them (loss 0.414).
+(REALISM.md: 21 of 21 within the bounds). The pucker's ring (AU18) was searched held over
+the fold tests' 200 frames, with the pairs it fluttered in most joining the loss
+(``--frames 200 --pairs AU18+AU23,AU18+AU24,AU12+AU18,AU18+AU22``; held that long,
+trials are scored by the fold tests' rest and an amplitude kept within 0.85-1.25): held
+80 frames, a stronger ring looked settled, and at 200 its lips chattered against their
+contact, alone and in 12 pairs. Re-run from the file's values, that search keeps them (loss 0.414).
 
 The chin raiser's muscles (AU17: the mentalis and the lower incisivi) are shared with the
 lip press (AU24): ``--also AU24`` joins the press's loss to the raiser's. What the file

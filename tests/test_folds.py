@@ -11,19 +11,20 @@ Folds: none, for every unit alone, every pair and every expression of the librar
 
 Not at rest within 200 frames: 12 of the 274 pairs (measured 2026-12-02, with the lips'
 inclined contact and the lower incisivi), 8 of them with the pucker (AU18) or the funnel
-(AU22, the pucker's ring with the lips parted). The mode is a flutter of the back-projected muscle force
-(eq. 3.22-3.25, which is not conservative: the triangle a vertex's 2D force is carried
-back onto changes as the vertex moves, so the force does work around a closed path) where
-two units' regions overlap at the lips, the base of the nose or, for AU12 + AU20, the
-cheek where the two lip-corner pullers meet: the largest AU12 + AU20, 0.24 mm a frame and
-9.3e-4 of its peak kinetic energy; the others 0.006-0.11 mm. It is a limit cycle, not a
-runaway: held 400 frames, each pair's kinetic energy over its last 100 frames peaks
-within a factor 2 of where it peaked over frames 100-200 (most to the digits shown;
-AU9 + AU23 wanders between 1.2e-4 and 3.3e-4 of its peak over 1,000 frames), as the
-implicit step's damping takes out what the non-conservative force puts in each cycle and
-the force is bounded by its activation. That is what the pairs' test holds them to: a
-pair not at rest must, held twice as long, be no stronger than that, and stay under a thousandth of its peak energy and 0.3 mm a frame
-(about a pixel of a 512² face frame). A first, stronger pucker chattered alone (0.007 mm
+(AU22, the pucker's ring with the lips parted). The mode is a flutter of the
+back-projected muscle force (eq. 3.22-3.25, which is not conservative: the triangle a
+vertex's 2D force is carried back onto changes as the vertex moves, so the force does
+work around a closed path) where two units' regions overlap at the lips, the base of the
+nose or, for AU12 + AU20, the cheek where the two lip-corner pullers meet: the largest
+AU12 + AU20, 0.24 mm a frame and 9.3e-4 of its peak kinetic energy; the others
+0.006-0.11 mm. It is a limit cycle, not a runaway: held 400 frames, each pair's kinetic
+energy over its last 100 frames peaks within a factor 2 of where it peaked over frames
+100-200 (most to the digits shown; AU9 + AU23 wanders between 1.2e-4 and 3.3e-4 of its
+peak over 1,000 frames), as the implicit step's damping takes out what the
+non-conservative force puts in each cycle and the force is bounded by its activation.
+That is what the pairs' test holds them to: a pair not at rest must, held twice as long,
+be no stronger than that, and stay under a thousandth of its peak energy and 0.3 mm a
+frame (about a pixel of a 512² face frame). A first, stronger pucker chattered alone (0.007 mm
 a frame) and settled to 5e-19 of its peak with the contacts off; a contact penalty inside
 the implicit step made it worse (0.07 mm a frame); more bending (k_b = 150) stills some
 pairs but unsettles AU17 alone. Before AU12 was calibrated (its zygomaticus major

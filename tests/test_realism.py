@@ -62,6 +62,25 @@ def test_action_unit_matches_icts_scanned_shape(au, ict, head_model, request):
     assert held.inverted == 0, f"{au}: {held.inverted} inverted triangles"
 
 
+def head_file_and_model_with(head_model, change):
+    """The default head's muscle file (a dict) and a model of the head built with
+    ``change`` (a function editing that dict in place) applied to a copy of it, with the
+    head_model's material before resolution scales it."""
+    import copy
+
+    import yaml
+
+    from facesim.config import HEAD_MUSCLES
+    from facesim.model import build_model
+    from facesim.muscles import MuscleFile, resolve_muscles
+
+    raw = yaml.safe_load(HEAD_MUSCLES.read_text())
+    changed = copy.deepcopy(raw)
+    change(changed)
+    material = Spec.model_validate(dict(name="neutral", frames=1)).material
+    return raw, build_model(head_model.mesh, resolve_muscles(MuscleFile.model_validate(changed), head_model.mesh), material)
+
+
 @pytest.mark.parametrize("au, muscle", [("AU18", "incisivus_labii"), ("AU14", "buccinator")])
 def test_a_muscles_push_moves_the_skin_off_its_surface_as_far_as_icts(au, muscle, ict, head_model):
     """ICT's pucker (AU18) moves the lips about 1 cm forward, its dimpler (AU14) the lip
@@ -73,18 +92,12 @@ def test_a_muscles_push_moves_the_skin_off_its_surface_as_far_as_icts(au, muscle
     off the face (depth): the pucker 0.79 of ICT's depth against 0.36 without its push
     (cosine 0.90 against 0.83), the dimpler 0.92 against -0.28, forward instead of back
     (cosine 0.83 against 0.27)."""
-    import yaml
+    def unpushed(raw):
+        for m in raw["muscles"]:
+            if m["name"] in (muscle, f"{muscle}_l", f"{muscle}_r"):
+                m["protrusion"] = 0.0
 
-    from facesim.config import HEAD_MUSCLES
-    from facesim.model import build_model
-    from facesim.muscles import MuscleFile, resolve_muscles
-
-    raw = yaml.safe_load(HEAD_MUSCLES.read_text())
-    for m in raw["muscles"]:
-        if m["name"] in (muscle, f"{muscle}_l", f"{muscle}_r"):
-            m["protrusion"] = 0.0
-    material = Spec.model_validate(dict(name="neutral", frames=1)).material  # the head_model's, before resolution scales it
-    flat = build_model(head_model.mesh, resolve_muscles(MuscleFile.model_validate(raw), head_model.mesh), material)
+    _, flat = head_file_and_model_with(head_model, unpushed)
     theirs = ict[au][load_head(HEAD).landmarks, 2]
     deepest = np.argsort(np.abs(theirs))[-10:]
     figure = figure_for(head_model)
@@ -104,18 +117,9 @@ def test_a_lower_lip_pushed_up_slides_forward_over_the_upper_one(head_model):
     ``contact_tilt`` degrees (facesim.rig): under AU17 the pair's relative motion lies in
     that plane, and the upper lip rises less than half as far as across a horizontal one,
     which the lower lip can only lift."""
-    import yaml
-
-    from facesim.config import HEAD_MUSCLES
-    from facesim.model import build_model
-    from facesim.muscles import MuscleFile, resolve_muscles
-
-    raw = yaml.safe_load(HEAD_MUSCLES.read_text())
-    tilt = np.radians(raw["jaw"]["contact_tilt"])
+    raw, flat = head_file_and_model_with(head_model, lambda raw: raw["jaw"].update(contact_tilt=0.0))
     assert raw["jaw"]["contact_tilt"] > 0
-    raw["jaw"]["contact_tilt"] = 0.0
-    material = Spec.model_validate(dict(name="neutral", frames=1)).material
-    flat = build_model(head_model.mesh, resolve_muscles(MuscleFile.model_validate(raw), head_model.mesh), material)
+    tilt = np.radians(raw["jaw"]["contact_tilt"])
     upper, lower = 13, 14  # the inner lips' middle, a contact pair
     figure = figure_for(head_model)
     tilted, level = (hold(model, "AU17", figure=figure).displacement for model in (head_model, flat))
