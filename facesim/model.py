@@ -127,6 +127,8 @@ class Model:
     ring_a: np.ndarray  # (3t,)
     ring_b: np.ndarray  # (3t,)
     spring_indices: np.ndarray  # (s, 2)
+    spring_end: np.ndarray  # (2, s) the same by rows: the kernels' vector loops read each end's row
+    corner: np.ndarray  # (3, t) the triangles' corners by rows (faces transposed), as spring_end
     spring_rest_length: np.ndarray  # (s,)
     repulsion_vertex: np.ndarray  # (r,)
     repulsion_edge: np.ndarray  # (r, 2)
@@ -254,6 +256,8 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         ring_a=ring_a,
         ring_b=ring_b,
         spring_indices=edges,
+        spring_end=edges.T,
+        corner=faces.T,
         spring_rest_length=np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1),
         repulsion_vertex=repulsion_vertex,
         repulsion_edge=repulsion_edge,
