@@ -4,6 +4,8 @@ Every kernel takes its Numba options from here and every tolerance the code comp
 against lives here, so that a reader can see them in one place and change them once.
 """
 
+import hashlib
+import os
 from pathlib import Path
 
 #: Options for every ``@njit`` kernel. ``cache=True`` keeps compiled code on disk so that
@@ -27,6 +29,30 @@ PARALLEL_FROM = 4000
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 PROJECT_DIR = PACKAGE_DIR.parent
+
+
+def _key_numba_cache() -> None:
+    """Keep facesim's compiled kernels in a directory named by a hash of facesim's code.
+
+    Numba's cache knows a kernel is stale only when the kernel's own file changes: a
+    kernel of facesim.solver compiled with facesim.kernels' callees inlined is loaded
+    again after kernels.py changes, and runs the old code (measured on 2026-12-02, a
+    ``git pull`` over an editable install would do the same). Under
+    ``$NUMBA_CACHE_DIR`` if set, else facesim's cache directory (facesim.cache), in
+    ``numba-<hash>``. Runs before any facesim kernel is decorated: every module that
+    compiles one takes its options from here."""
+    import numba
+
+    from .cache import directory
+
+    digest = hashlib.sha1()
+    for path in sorted(PACKAGE_DIR.glob("*.py")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    base = numba.config.CACHE_DIR or os.fspath(directory())
+    numba.config.CACHE_DIR = os.path.join(base, f"numba-{digest.hexdigest()[:16]}")
+
+
+_key_numba_cache()
 
 
 def _data(name: str) -> Path:

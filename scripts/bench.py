@@ -606,12 +606,39 @@ where a step's time goes.
   factor and a scatter to three vertices), the muscles 107 ns (the back-projection of
   eq. 3.22-3.25 at every vertex of every active muscle's region, about 200 ns per region
   vertex, and the flood fills, 0.4 ms a step), the springs 37 ns. The quasi-implicit
-  step no longer writes the implicit solver's links (13% of the step). What would close
-  it: the pairs and springs in float32 over structure-of-arrays with the scatter replaced
-  by a per-vertex gather the compiler can vectorise (not built). The vertex order is not
-  the limit: reordered by scipy's reverse Cuthill-McKee (with the triangles sorted to
-  match, or not), the step cost the same within 3% at 27,614 and 109,758 vertices, on one
-  thread and two (measured on 2026-12-02).
+  step no longer writes the implicit solver's links (13% of the step). The vertex order
+  is not the limit: reordered by scipy's reverse Cuthill-McKee (with the triangles sorted
+  to match, or not), the step cost the same within 3% at 27,614 and 109,758 vertices, on
+  one thread and two (measured on 2026-12-02).
+
+  Tried on 2026-12-02 (evening, Intel Xeon with AVX-512, 27,614 vertices, one thread, the
+  happy face five frames in), each measured and none kept, because none made the whole
+  step faster:
+  - *A gather per vertex instead of the scatter* (each vertex summing its springs'
+    forces from the one-ring): 20 ns per vertex for the gather alone against 13 for the
+    scatter. Two indirections per neighbour cost more than the scatter's writes.
+  - *The springs' g in a loop of its own over the springs' ends by rows* (structure of
+    arrays), then scattered. The loop runs on vector lanes only when the exponent γ is
+    known when compiling: 9 ns per vertex, 24 with the scatter, against 36 today. With γ
+    read from the material at run time it stays scalar, because the squarings in
+    `kernels._power` branch on γ: 40 ns. A branch-free fixed count of squarings made
+    every kernel slower still (44 and 108 ns).
+  - *The edge repulsion a triangle at a time* (a triangle's three pairs share their
+    corners' loads, and each corner is written once): 77 ns against 101 looped alone,
+    but the whole step did not change (227 against 229 ns per vertex-step). In two
+    passes (the corners' forces by rows, then scattered) it takes 36 ns with ζ known
+    when compiling and 89 ns with the material's.
+  - *The muscles' back-projection without branches* (every wedge of the one-ring
+    evaluated and weighted 0 where it does not hold the force): 1.7 times slower. In the
+    simulated state it costs 69 ns per region vertex; 0.8% of them fall through to
+    `kernels._between_edges` (7% on the 468-vertex face, at its rim).
+
+  What would close it: the springs' and pairs' kernels compiled for the material's
+  exponents (Numba's literal dispatch, one compilation per value of γ and ζ), with the
+  implicit links written in a pass of their own. From the prototypes above that is about
+  24 + 36 ns where today's kernels take 36 + 101, about 150 ns per vertex-step or 6.6
+  million per second. Float32 would double the lanes; the muscles' 69 ns per region
+  vertex would remain.
 - **`prange`, 2 threads against 1.** The springs, the edge repulsion, the bending, the
   muscles' flood fills (section 3.3; the muscles split by fixed slices,
   kernels._find_regions) and each muscle's region loop run on every core for a mesh of
