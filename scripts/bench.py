@@ -589,56 +589,36 @@ ANALYSIS = """### Where the targets stand: the missed ones and what would close 
 The per-step profile above (each kernel looped in compiled code, so no call overhead) names
 where a step's time goes.
 
-- **Simulation, 2 ms for happy on the Hopper face.** The implicit solver takes one step
-  per frame where the thesis's update takes four, but its step is the force terms plus
-  several conjugate-gradient iterations, each a product as costly as the springs and the
-  repulsion together. Per pair the kernels are scalar code at about 6-19 ns (a square
-  root, two divisions, the (1 + s²)^γ factor and a scatter to three vertices). What would
-  close it: the links' blocks written once per step in structure-of-arrays form and
-  applied by a vectorised product (float32, 8 lanes), and the muscles' back-projection
-  (eq. 3.22-3.25, for every vertex of every active muscle's region, every step) done once
-  per vertex for the sum of the muscles' 2D forces, a departure from the thesis's
-  per-muscle projection that would have to be calibrated again.
-- **10 million vertex-steps per second per core at 28k vertices.** Less than half of it
-  (the scaling table: the thesis's step, Loop-subdivided face). Profiled on 2026-12-02 at
-  27,614 vertices, one thread, per vertex-step: the edge repulsion 101 ns (six pairs a
-  vertex, each a projection onto its edge, a square root, a division, the (1 + s²)^ζ
-  factor and a scatter to three vertices), the muscles 107 ns (the back-projection of
-  eq. 3.22-3.25 at every vertex of every active muscle's region, about 200 ns per region
-  vertex, and the flood fills, 0.4 ms a step), the springs 37 ns. The quasi-implicit
-  step no longer writes the implicit solver's links (13% of the step). The vertex order
-  is not the limit: reordered by scipy's reverse Cuthill-McKee (with the triangles sorted
-  to match, or not), the step cost the same within 3% at 27,614 and 109,758 vertices, on
-  one thread and two (measured on 2026-12-02).
-
-  Tried on 2026-12-02 (evening, Intel Xeon with AVX-512, 27,614 vertices, one thread, the
-  happy face five frames in), each measured and none kept, because none made the whole
-  step faster:
-  - *A gather per vertex instead of the scatter* (each vertex summing its springs'
-    forces from the one-ring): 20 ns per vertex for the gather alone against 13 for the
-    scatter. Two indirections per neighbour cost more than the scatter's writes.
-  - *The springs' g in a loop of its own over the springs' ends by rows* (structure of
-    arrays), then scattered. The loop runs on vector lanes only when the exponent γ is
-    known when compiling: 9 ns per vertex, 24 with the scatter, against 36 today. With γ
-    read from the material at run time it stays scalar, because the squarings in
-    `kernels._power` branch on γ: 40 ns. A branch-free fixed count of squarings made
-    every kernel slower still (44 and 108 ns).
-  - *The edge repulsion a triangle at a time* (a triangle's three pairs share their
-    corners' loads, and each corner is written once): 77 ns against 101 looped alone,
-    but the whole step did not change (227 against 229 ns per vertex-step). In two
-    passes (the corners' forces by rows, then scattered) it takes 36 ns with ζ known
-    when compiling and 89 ns with the material's.
-  - *The muscles' back-projection without branches* (every wedge of the one-ring
-    evaluated and weighted 0 where it does not hold the force): 1.7 times slower. In the
-    simulated state it costs 69 ns per region vertex; 0.8% of them fall through to
-    `kernels._between_edges` (7% on the 468-vertex face, at its rim).
-
-  What would close it: the springs' and pairs' kernels compiled for the material's
-  exponents (Numba's literal dispatch, one compilation per value of γ and ζ), with the
-  implicit links written in a pass of their own. From the prototypes above that is about
-  24 + 36 ns where today's kernels take 36 + 101, about 150 ns per vertex-step or 6.6
-  million per second. Float32 would double the lanes; the muscles' 69 ns per region
-  vertex would remain.
+- **Simulation, 2 ms for happy on the Hopper face.** Not met: the thesis's update takes
+  four steps a frame, 140 steps of about 80 µs (170 ns per vertex-step, as above); the
+  implicit solver one step a frame, but its step is the force terms, their links of K
+  (a scalar loop of their own) and about eight conjugate-gradient iterations, each a
+  product over the links as costly as the springs and the repulsion together (the
+  profile). 2 ms is 14 µs per step of the thesis's update, 30 ns per vertex-step. What
+  would close it: the product over the links in the same two passes on vector lanes
+  (each link's block applied in rows, then scattered), fewer iterations (the Hopper
+  face's system at rest factorised, as the head's is), and the muscles' back-projection
+  on vector lanes.
+- **10 million vertex-steps per second per core at 28k vertices.** Not met (the scaling
+  table: the thesis's step, Loop-subdivided face). Profiled on 2026-12-02 at 27,614
+  vertices, one thread, per vertex-step: the muscles 72 ns (the back-projection of eq.
+  3.22-3.25, about 80 ns per vertex of each active muscle's region: a 2x2 solve for each
+  of the six or so wedges of its one-ring, then a square root and divisions for the wedge
+  that holds the force; and the muscles' frame, an atan2 at every vertex, 12 ns), the
+  edge repulsion 51 ns, the springs 31 ns. The springs and the pairs take two passes
+  over structure-of-arrays (facesim.kernels): the per-spring and per-triangle loops run on
+  vector lanes (8 doubles, AVX-512), which made them 35 -> 31 and 103 -> 51 ns and the
+  whole step 227 -> 170 ns (4.3 -> 5.9 million per second), and the scatter to the
+  vertices stays scalar (the springs' vector loop is 9 ns a vertex of their 31). Tried
+  and not kept, measured the same day: each vertex gathering its springs from its
+  one-ring instead of the scatter (20 ns against 13: two indirections per neighbour),
+  and the back-projection without branches, every wedge weighted (1.7 times slower).
+  The vertex order is not the limit: reordered by scipy's reverse Cuthill-McKee (with
+  the triangles sorted to match, or not), the step cost the same within 3% at 27,614 and
+  109,758 vertices, on one thread and two. What would close it: the back-projection on
+  vector lanes (the region's wedges in rows, the holding wedge found by sign tests), the
+  link loops in float32 (16 lanes), and the slices' buffers summed once per step where
+  each term sums them now.
 - **`prange`, 2 threads against 1.** The springs, the edge repulsion, the bending, the
   muscles' flood fills (section 3.3; the muscles split by fixed slices,
   kernels._find_regions) and each muscle's region loop run on every core for a mesh of
