@@ -26,10 +26,13 @@ runs it on vector lanes, then a loop adding those forces to the vertices. On one
 27,614 vertices that made the springs 35 -> 31 ns a vertex and the edge repulsion
 103 -> 51 (2026-12-02, AVX-512). What keeps the first loop on vector lanes: no call it
 cannot vectorise (the general pow: ``_power``, and one loop per kind of exponent), and no
-writes but its own outputs (the implicit step's links are written in a loop of their
-own, ``_spring_links``, ``_repulsion_links``). Numba's cache does not see a change in a
-callee's file: after editing this module, clear ``__pycache__`` before timing
-facesim.solver's kernels, or they run the old code.
+writes but its own outputs. The implicit step needs the links of K as well, whose
+writes keep a loop scalar; it takes a scalar loop that writes both (``_spring_links``,
+``_repulsion_triangle`` with its links). On the Hopper face the implicit step's force
+terms take 112 µs a step so, 129 with a vector loop and a second loop for the links,
+and took 106 as one scalar loop per term that also scattered (measured on 2026-12-02).
+Numba's cache does not see a change in a callee's file (facesim.config keys it by a hash
+of facesim's code).
 
 The springs, the edge repulsion, the bending, the hypodermis, the muscles' frame, their
 flood fills and each muscle's region run on every core for a large mesh (``prange``,
@@ -294,24 +297,28 @@ def _spring_forces(model, xp, forces):
     """Springs on the mesh edges, eq. 3.6, at the predicted positions: F_i = g (X_i* - X_j*),
     its g into both ends' stiffness (eq. 3.17), and, for the implicit step, spring s as
     link s of K. Two passes: every spring's g into ``tension``, in a loop over the rows
-    of the springs' ends (``spring_end``) that runs on vector lanes; then each spring's
-    force added to its ends (``_scatter_springs``)."""
+    of the springs' ends (``spring_end``) that runs on vector lanes (for the implicit
+    step, ``_spring_links``, which also writes the links); then each spring's force added
+    to its ends (``_scatter_springs``)."""
     tension = forces.tension
     squarable = _squarable(model.nonlinearity - 1.0)
-    for s in prange(tension.shape[0]):
-        tension[s] = _spring(model, xp, s, squarable)[6]
-    _scatter_springs(model, xp, forces)
     if model.implicit:
-        _spring_links(model, xp, forces)
+        _spring_links(model, xp, squarable, forces)
+    else:
+        for s in prange(tension.shape[0]):
+            tension[s] = _spring(model, xp, s, squarable)[6]
+    _scatter_springs(model, xp, forces)
 
 
 @njit(**PARALLEL_OPTIONS)
-def _spring_links(model, xp, forces):
-    """Spring s as link s of K (``Forces``): a loop of its own, which keeps the links'
-    writes out of ``_spring_forces``'s vector loop (which then runs scalar: measured)."""
-    squarable = _squarable(model.nonlinearity - 1.0)
-    for s in prange(model.spring_end.shape[1]):
+def _spring_links(model, xp, squarable, forces):
+    """Every spring's g into ``tension`` and spring s as link s of K (``Forces``), for the
+    implicit step: a loop of its own, since writing the links keeps a loop off the vector
+    lanes (measured), and the thesis's update needs only the g."""
+    tension = forces.tension
+    for s in prange(tension.shape[0]):
         i, j, dx, dy, dz, length, g, along = _spring(model, xp, s, squarable)
+        tension[s] = g
         _set_link(forces, s, i, j, j, 1.0, -1.0, 0.0, dx, dy, dz, length, g, along)
 
 
@@ -374,10 +381,10 @@ def _repulsion_pair(model, pair, squarable, ix, iy, iz, ax, ay, az, bx, by, bz):
 
 
 @njit(**dict(NUMBA_OPTIONS, inline="always"))
-def _repulsion_triangle(model, xp, t, squarable, out, stiffness):
+def _repulsion_triangle(model, xp, t, squarable, out, stiffness, forces, links):
     """Triangle t's three pairs of eq. 3.7 (``_edge_repulsion_forces``): each corner's own
     R and its shares of the reactions on the two edges it ends, into ``out`` (9, t) and
-    its h into ``stiffness`` (3, t)."""
+    its h into ``stiffness`` (3, t); with ``links``, the pairs as links of K too."""
     corner = model.corner
     a = corner[0, t]
     b = corner[1, t]
@@ -385,9 +392,14 @@ def _repulsion_triangle(model, xp, t, squarable, out, stiffness):
     ax, ay, az = xp[a, 0], xp[a, 1], xp[a, 2]
     bx, by, bz = xp[b, 0], xp[b, 1], xp[b, 2]
     cx, cy, cz = xp[c, 0], xp[c, 1], xp[c, 2]
-    ha, _, ta, rax, ray, raz, _ = _repulsion_pair(model, 3 * t, squarable, ax, ay, az, bx, by, bz, cx, cy, cz)
-    hb, _, tb, rbx, rby, rbz, _ = _repulsion_pair(model, 3 * t + 1, squarable, bx, by, bz, cx, cy, cz, ax, ay, az)
-    hc, _, tc, rcx, rcy, rcz, _ = _repulsion_pair(model, 3 * t + 2, squarable, cx, cy, cz, ax, ay, az, bx, by, bz)
+    ha, la, ta, rax, ray, raz, da = _repulsion_pair(model, 3 * t, squarable, ax, ay, az, bx, by, bz, cx, cy, cz)
+    hb, lb, tb, rbx, rby, rbz, db = _repulsion_pair(model, 3 * t + 1, squarable, bx, by, bz, cx, cy, cz, ax, ay, az)
+    hc, lc, tc, rcx, rcy, rcz, dc = _repulsion_pair(model, 3 * t + 2, squarable, cx, cy, cz, ax, ay, az, bx, by, bz)
+    if links:  # pair r as link s + r of K, u = X_i - (1 - t) X_a - t X_b with the foot's t held
+        l = model.spring_end.shape[1] + 3 * t
+        _set_link(forces, l, a, b, c, 1.0, ta - 1.0, -ta, rax, ray, raz, da, ha, la)
+        _set_link(forces, l + 1, b, c, a, 1.0, tb - 1.0, -tb, rbx, rby, rbz, db, hb, lb)
+        _set_link(forces, l + 2, c, a, b, 1.0, tc - 1.0, -tc, rcx, rcy, rcz, dc, hc, lc)
     stiffness[0, t] = ha
     stiffness[1, t] = hb
     stiffness[2, t] = hc
@@ -426,32 +438,17 @@ def _edge_repulsion_forces(model, xp, forces):
     corner, out, stiffness = model.corner, forces.corner_force, forces.corner_stiffness
     # one loop per kind of exponent: the compiler takes a test out of a loop only when
     # the loop is small, and this one runs on vector lanes only without the general pow
-    if _squarable(model.repulsion_nonlinearity - 1.0):
+    squarable = _squarable(model.repulsion_nonlinearity - 1.0)
+    if model.implicit:  # writing the links keeps a loop off the vector lanes anyway
         for t in prange(corner.shape[1]):
-            _repulsion_triangle(model, xp, t, True, out, stiffness)
+            _repulsion_triangle(model, xp, t, squarable, out, stiffness, forces, True)
+    elif squarable:
+        for t in prange(corner.shape[1]):
+            _repulsion_triangle(model, xp, t, True, out, stiffness, forces, False)
     else:
         for t in prange(corner.shape[1]):
-            _repulsion_triangle(model, xp, t, False, out, stiffness)
+            _repulsion_triangle(model, xp, t, False, out, stiffness, forces, False)
     _scatter_corners(model, forces)
-    if model.implicit:
-        _repulsion_links(model, xp, forces)
-
-
-@njit(**PARALLEL_OPTIONS)
-def _repulsion_links(model, xp, forces):
-    """Pair r as link s + r of K (``Forces``), u = X_i - (1 - t) X_a - t X_b with the foot's
-    t held: a loop of its own, as the springs' (``_spring_links``)."""
-    corner, springs = model.corner, model.spring_end.shape[1]
-    squarable = _squarable(model.repulsion_nonlinearity - 1.0)
-    for t in prange(corner.shape[1]):
-        for k in range(3):
-            i = corner[k, t]
-            a = corner[(k + 1) % 3, t]
-            b = corner[(k + 2) % 3, t]
-            h, along, foot, dx, dy, dz, distance = _repulsion_pair(model, 3 * t + k, squarable, xp[i, 0], xp[i, 1],
-                                                                   xp[i, 2], xp[a, 0], xp[a, 1], xp[a, 2], xp[b, 0],
-                                                                   xp[b, 1], xp[b, 2])
-            _set_link(forces, springs + 3 * t + k, i, a, b, 1.0, foot - 1.0, -foot, dx, dy, dz, distance, h, along)
 
 
 @njit(**PARALLEL_OPTIONS)
