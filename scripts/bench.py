@@ -660,10 +660,13 @@ where a step's time goes.
   2026-12-01). Tried then: the skin drawn first, so that the depth test discards the
   teeth and mouth behind it, gains nothing measurable.
 - **3 s for `facesim render` in a fresh process: met on a quiet machine, at its edge on a
-  busy one.** 2.79-2.83 s in two runs of 2026-12-02 and 3.05 s in a third that
-  afternoon, with the code of the second: the commits before and after that day's last
-  changes, run alternately, took 3.30 and 3.29 s (medians of 6), so the machine moved,
-  not the code. What would give it room: the model's arrays in the on-disk cache (the
+  busy one.** 2.64 s (2.55-2.88) in the run above; 2.79-3.05 s in three runs earlier on
+  2026-12-02, where the commits before and after that day's last changes, run
+  alternately, took 3.30 and 3.29 s (medians of 6): the machine moves more than the
+  code. Tried on 2026-12-02: the head mask's mirror map (an optimal assignment with
+  SciPy's import, 0.3 s under a profiler) kept in facesim's cache, no measurable change
+  (2.62-2.70 against 2.66-2.75 s), because trimesh, which pyrender needs anyway, imports
+  the same parts of SciPy. What would give it room: the model's arrays in the on-disk cache (the
   model is 0.6 s of it) and the GL context made in a thread while the model builds (0.3
   s). Profiled on 2026-12-02 before the changes below (3.0-3.5 s wall), in order:
   importing the command line 0.3 s; the model 0.6 s (with the imports of trimesh and SciPy it needs); the simulation 0.2 s
