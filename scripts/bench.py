@@ -596,9 +596,11 @@ where a step's time goes.
   product over the links as costly as the springs and the repulsion together (the
   profile). 2 ms is 14 µs per step of the thesis's update, 30 ns per vertex-step. What
   would close it: the product over the links in the same two passes on vector lanes
-  (each link's block applied in rows, then scattered), fewer iterations (the Hopper
-  face's system at rest factorised, as the head's is), and the muscles' back-projection
-  on vector lanes.
+  (each link's block applied in rows, then scattered) and the muscles' back-projection
+  on vector lanes. Not fewer iterations by the head's preconditioner: the Hopper face's
+  system at rest factorised (60,275 entries) made happy 26.6 ms against Jacobi's 22.0
+  (measured on 2026-12-02), each iteration's two triangular solves costing more than
+  the iterations they save.
 - **10 million vertex-steps per second per core at 28k vertices.** Not met (the scaling
   table: the thesis's step, Loop-subdivided face). Profiled on 2026-12-02 at 27,614
   vertices, one thread, per vertex-step: the muscles 72 ns (the back-projection of eq.
