@@ -180,8 +180,8 @@ def _power(base, exponent, squarable):
     thesis's γ = ζ = 5), several times faster than the general pow in the inner loops.
     The squarings are a fixed count of steps without a branch, and ``squarable`` is the
     same for a whole loop, so the compiler takes the test out of the loop and runs the
-    loop on vector lanes (measured: springs 8 ns a vertex where testing the exponent
-    inside kept them scalar at 22)."""
+    loop on vector lanes (measured on 2026-12-02, the springs' loop alone at 27,614
+    vertices: 8 ns a vertex)."""
     if squarable:
         result = 1.0
         e = int(exponent)

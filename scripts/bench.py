@@ -610,7 +610,7 @@ where a step's time goes.
   edge repulsion 51 ns, the springs 31 ns. The springs and the pairs take two passes
   over structure-of-arrays (facesim.kernels): the per-spring and per-triangle loops run on
   vector lanes (8 doubles, AVX-512), which made them 35 -> 31 and 103 -> 51 ns and the
-  whole step 227 -> 170 ns (4.3 -> 5.9 million per second), and the scatter to the
+  whole step 227 -> 164-170 ns (4.3 -> 5.9-6.1 million per second), and the scatter to the
   vertices stays scalar (the springs' vector loop is 9 ns a vertex of their 31). Tried
   and not kept, measured the same day: each vertex gathering its springs from its
   one-ring instead of the scatter (20 ns against 13: two indirections per neighbour),
