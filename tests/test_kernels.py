@@ -146,6 +146,27 @@ def test_uv_projection_matches_reference(model, rng):
     assert_close(uv, naive.project_uv(x, model.axis_x, model.axis_z, model.radius))
 
 
+@numba.njit
+def _atan2_all(y, x, out):
+    for i in range(y.shape[0]):
+        out[i] = K._atan2(y[i], x[i])
+
+
+def test_vectorised_arctangent_matches_numpy_in_every_octant_and_on_the_axes(rng):
+    """The muscles' frame (eq. 3.21) takes its angle from facesim's own atan2 (it runs on
+    vector lanes where libm's does not): it must be numpy's to rounding, at any scale."""
+    size = 200_000
+    y = rng.standard_normal(size) * 10.0 ** rng.uniform(-6, 6, size)
+    x = rng.standard_normal(size) * 10.0 ** rng.uniform(-6, 6, size)
+    axes = np.array([[0.0, 1.0], [0.0, -1.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 0.0], [2.0, 2.0], [-2.0, -2.0],
+                     [1.0, -1e-300], [np.tan(np.pi / 8), 1.0], [1.0, np.tan(np.pi / 8)]])
+    y, x = np.concatenate([y, axes[:, 0]]), np.concatenate([x, axes[:, 1]])
+    out = np.empty_like(y)
+    _atan2_all(y, x, out)
+    expected = np.arctan2(y, x)
+    assert np.all(np.abs(out - expected) <= 4e-15 * np.maximum(np.abs(expected), 1e-300))
+
+
 def test_falloff_matches_reference_including_degenerate_points(rng):
     origin, insertion = np.array([0.0, 0.0, 0.0]), np.array([3.0, 1.0, 0.5])
     points = np.vstack([rng.uniform(-2, 6, (500, 3)), origin, insertion, 2 * insertion, -insertion])
