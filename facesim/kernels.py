@@ -41,7 +41,13 @@ links into buffers of their own, summed per vertex in slice order (``_gather_par
 the fills split the muscles by fixed slices (``_find_regions``), so the bits do not
 depend on the thread count. Inside a parallel loop every array is written through a local
 name: Numba 0.68 drops writes made there through a tuple's field (``forces.force[i] =
-...``; measured), and takes no tuple nested in another (so ``Forces`` is flat).
+...``; measured), and takes no tuple nested in another (so ``Forces`` is flat). Nor does
+a parallel loop read the model: Numba hands a loop every tuple its body names, whole,
+and the model's 67 fields cost each loop about 3 s of compiling (a one-line loop: 3.9 s
+against 1.0 with its one array taken out first) and 0.6 µs at each start. A term takes
+out what it reads before its loop, as locals or as a small tuple of its own
+(``_spring_fields``, ``_repulsion_fields``, ``_muscle_fields``, ``_ring_fields``,
+``_links``): compiling every kernel went 143 -> 79 s (2026-12-03, AMD EPYC).
 
 A term adds, at the predicted positions X* (eq. 3.14), its force F_i and, where its force
 depends on X_i, the scalar stiffness K_i = Σ ∂F_i/∂X_i along the spring (the Σ g + Σ h of
@@ -210,52 +216,60 @@ def _nonlinear_coefficient(length, rest, k0, exponent, unit, squarable):
     return g, k0 * factor * (1.0 + (2.0 * exponent + 1.0) * square)
 
 
+@njit(**dict(NUMBA_OPTIONS, inline="always"))
+def _links(forces):
+    """The arrays of K's links (``Forces``), as the link terms' loops are handed them
+    (module docstring)."""
+    return forces.node, forces.weight, forces.axis, forces.along, forces.across
+
+
 @njit(**NUMBA_OPTIONS)
-def _set_link(forces, l, i, j, k, wi, wj, wk, dx, dy, dz, length, g, along):
-    """Link l of K (``Forces``): nodes i, j, k with weights (the fourth node unused),
+def _set_link(links, l, i, j, k, wi, wj, wk, dx, dy, dz, length, g, along):
+    """Link l of K (``_links``): nodes i, j, k with weights (the fourth node unused),
     axis (dx, dy, dz) / length, the tension's derivative ``along`` and -g (the tension
     over the length, eq. 3.17's g with its sign turned) across, clamped at 0."""
-    forces.node[l, 0] = i
-    forces.node[l, 1] = j
-    forces.node[l, 2] = k
-    forces.node[l, 3] = k
-    forces.weight[l, 0] = wi
-    forces.weight[l, 1] = wj
-    forces.weight[l, 2] = wk
-    forces.weight[l, 3] = 0.0
+    node, weight, axis, along_of, across_of = links
+    node[l, 0] = i
+    node[l, 1] = j
+    node[l, 2] = k
+    node[l, 3] = k
+    weight[l, 0] = wi
+    weight[l, 1] = wj
+    weight[l, 2] = wk
+    weight[l, 3] = 0.0
     inverse = 1.0 / max(length, LENGTH_EPS)
-    forces.axis[l, 0] = dx * inverse
-    forces.axis[l, 1] = dy * inverse
-    forces.axis[l, 2] = dz * inverse
-    forces.along[l] = along
-    forces.across[l] = max(-g, 0.0)
+    axis[l, 0] = dx * inverse
+    axis[l, 1] = dy * inverse
+    axis[l, 2] = dz * inverse
+    along_of[l] = along
+    across_of[l] = max(-g, 0.0)
 
 
 @njit(**NUMBA_OPTIONS)
-def _link_extension(forces, l, p):
+def _link_extension(node, weight, l, p):
     """Σ_k w_k p_node[l, k], link l's extension (``Forces``) in the vectors ``p`` (n, 3)."""
     ux = 0.0
     uy = 0.0
     uz = 0.0
     for k in range(4):
-        w = forces.weight[l, k]
-        node = forces.node[l, k]
-        ux += w * p[node, 0]
-        uy += w * p[node, 1]
-        uz += w * p[node, 2]
+        w = weight[l, k]
+        n = node[l, k]
+        ux += w * p[n, 0]
+        uy += w * p[n, 1]
+        uz += w * p[n, 2]
     return ux, uy, uz
 
 
 @njit(**NUMBA_OPTIONS)
-def _link_spread(forces, l, scale, bx, by, bz, out):
+def _link_spread(node, weight, l, scale, bx, by, bz, out):
     """out[node[l, k]] += scale w_k b for link l's nodes: a vector b acting on its
     extension, carried back to the vertices (the transpose of ``_link_extension``)."""
     for k in range(4):
-        w = scale * forces.weight[l, k]
-        node = forces.node[l, k]
-        out[node, 0] += w * bx
-        out[node, 1] += w * by
-        out[node, 2] += w * bz
+        w = scale * weight[l, k]
+        n = node[l, k]
+        out[n, 0] += w * bx
+        out[n, 1] += w * by
+        out[n, 2] += w * bz
 
 
 @njit(**NUMBA_OPTIONS)
@@ -279,17 +293,23 @@ def _gather_parts(forces):
 
 
 @njit(**dict(NUMBA_OPTIONS, inline="always"))
-def _spring(model, xp, s, squarable):
+def _spring_fields(model):
+    """What the springs read of the model (module docstring)."""
+    return model.spring_end, model.spring_rest_length, model.stiffness, model.nonlinearity, model.length_unit
+
+
+@njit(**dict(NUMBA_OPTIONS, inline="always"))
+def _spring(springs, xp, s, squarable):
     """Spring s of eq. 3.6 at the predicted positions: its ends i and j, X_i* - X_j* and its
     length, its g (eq. 3.17) and its stiffness along (``_nonlinear_coefficient``)."""
-    i = model.spring_end[0, s]
-    j = model.spring_end[1, s]
+    end, rest_length, k0, exponent, unit = springs
+    i = end[0, s]
+    j = end[1, s]
     dx = xp[i, 0] - xp[j, 0]
     dy = xp[i, 1] - xp[j, 1]
     dz = xp[i, 2] - xp[j, 2]
     length = math.sqrt(dx * dx + dy * dy + dz * dz)
-    g, along = _nonlinear_coefficient(length, model.spring_rest_length[s], model.stiffness, model.nonlinearity,
-                                      model.length_unit, squarable)
+    g, along = _nonlinear_coefficient(length, rest_length[s], k0, exponent, unit, squarable)
     return i, j, dx, dy, dz, length, g, along
 
 
@@ -301,35 +321,35 @@ def _spring_forces(model, xp, forces):
     of the springs' ends (``spring_end``) that runs on vector lanes (for the implicit
     step, ``_spring_links``, which also writes the links); then each spring's force added
     to its ends (``_scatter_springs``)."""
-    tension = forces.tension
+    tension, springs = forces.tension, _spring_fields(model)
     squarable = _squarable(model.nonlinearity - 1.0)
     if model.implicit:
-        _spring_links(model, xp, squarable, forces)
+        _spring_links(springs, xp, squarable, forces)
     else:
         for s in prange(tension.shape[0]):
-            tension[s] = _spring(model, xp, s, squarable)[6]
+            tension[s] = _spring(springs, xp, s, squarable)[6]
     _scatter_springs(model, xp, forces)
 
 
 @njit(**PARALLEL_OPTIONS)
-def _spring_links(model, xp, squarable, forces):
+def _spring_links(springs, xp, squarable, forces):
     """Every spring's g into ``tension`` and spring s as link s of K (``Forces``), for the
     implicit step: a loop of its own, since writing the links keeps a loop off the vector
     lanes (measured), and the thesis's update needs only the g."""
-    tension = forces.tension
+    tension, links = forces.tension, _links(forces)
     for s in prange(tension.shape[0]):
-        i, j, dx, dy, dz, length, g, along = _spring(model, xp, s, squarable)
+        i, j, dx, dy, dz, length, g, along = _spring(springs, xp, s, squarable)
         tension[s] = g
-        _set_link(forces, s, i, j, j, 1.0, -1.0, 0.0, dx, dy, dz, length, g, along)
+        _set_link(links, s, i, j, j, 1.0, -1.0, 0.0, dx, dy, dz, length, g, along)
 
 
 @njit(**PARALLEL_OPTIONS)
 def _scatter_springs(model, xp, forces):
     """Each spring's force g (X_i* - X_j*) added to its ends and g to their stiffness, by
     ``CHUNKS`` fixed slices of the springs (``_gather_parts``)."""
-    end, tension = model.spring_end, forces.tension
+    end, tension, parts = model.spring_end, forces.tension, forces.part
     for c in prange(CHUNKS):
-        part = forces.part[c]
+        part = parts[c]
         first, stop = _chunk(c, end.shape[1])
         for s in range(first, stop):
             i = end[0, s]
@@ -354,20 +374,29 @@ def _tissue_forces(model, xp, control, forces):
     every mode a restoring force. ``hold`` holds the skin over the
     mandible and the lid contours to their targets while the jaw and lids move."""
     force, stiffness, diagonal = forces.force, forces.stiffness, forces.diagonal
+    tissue, tie, hold, target = model.tissue, model.tie, control.hold, control.target
     for i in prange(xp.shape[0]):
-        k = model.tissue + model.tie[i] + control.hold[i]
+        k = tissue + tie[i] + hold[i]
         stiffness[i] -= k
         diagonal[i] += k
         for d in range(3):
-            force[i, d] -= k * (xp[i, d] - control.target[i, d])
+            force[i, d] -= k * (xp[i, d] - target[i, d])
 
 
 @njit(**dict(NUMBA_OPTIONS, inline="always"))
-def _repulsion_pair(model, pair, squarable, ix, iy, iz, ax, ay, az, bx, by, bz):
+def _repulsion_fields(model):
+    """What the edge repulsion reads of the model (module docstring)."""
+    return (model.corner, model.repulsion_rest_distance, model.stiffness, model.repulsion_nonlinearity,
+            model.length_unit)
+
+
+@njit(**dict(NUMBA_OPTIONS, inline="always"))
+def _repulsion_pair(pairs, pair, squarable, ix, iy, iz, ax, ay, az, bx, by, bz):
     """Eq. 3.7 for one pair: the vertex at (ix, iy, iz) against the line through the edge
     from (ax, ay, az) to (bx, by, bz), its foot P_k = a + t (b - a). Returns h (eq. 3.17)
     and the stiffness along, t, X_i - P_k and its length. Inlined: passing the model's
     tuple to a call per pair costs more than the pair (measured: 18 times slower)."""
+    rest_distance, k0, exponent, unit = pairs[1], pairs[2], pairs[3], pairs[4]
     ex = bx - ax
     ey = by - ay
     ez = bz - az
@@ -376,31 +405,31 @@ def _repulsion_pair(model, pair, squarable, ix, iy, iz, ax, ay, az, bx, by, bz):
     dy = iy - ay - t * ey
     dz = iz - az - t * ez
     distance = math.sqrt(dx * dx + dy * dy + dz * dz)
-    h, along = _nonlinear_coefficient(distance, model.repulsion_rest_distance[pair], model.stiffness,
-                                      model.repulsion_nonlinearity, model.length_unit, squarable)
+    h, along = _nonlinear_coefficient(distance, rest_distance[pair], k0, exponent, unit, squarable)
     return h, along, t, dx, dy, dz, distance
 
 
 @njit(**dict(NUMBA_OPTIONS, inline="always"))
-def _repulsion_triangle(model, xp, t, squarable, out, stiffness, forces, links):
+def _repulsion_triangle(pairs, xp, t, squarable, out, stiffness, links, first_link, write_links):
     """Triangle t's three pairs of eq. 3.7 (``_edge_repulsion_forces``): each corner's own
     R and its shares of the reactions on the two edges it ends, into ``out`` (9, t) and
-    its h into ``stiffness`` (3, t); with ``links``, the pairs as links of K too."""
-    corner = model.corner
+    its h into ``stiffness`` (3, t); with ``write_links``, the pairs as links of K too
+    (``_links``), from link ``first_link`` + 3t."""
+    corner = pairs[0]
     a = corner[0, t]
     b = corner[1, t]
     c = corner[2, t]
     ax, ay, az = xp[a, 0], xp[a, 1], xp[a, 2]
     bx, by, bz = xp[b, 0], xp[b, 1], xp[b, 2]
     cx, cy, cz = xp[c, 0], xp[c, 1], xp[c, 2]
-    ha, la, ta, rax, ray, raz, da = _repulsion_pair(model, 3 * t, squarable, ax, ay, az, bx, by, bz, cx, cy, cz)
-    hb, lb, tb, rbx, rby, rbz, db = _repulsion_pair(model, 3 * t + 1, squarable, bx, by, bz, cx, cy, cz, ax, ay, az)
-    hc, lc, tc, rcx, rcy, rcz, dc = _repulsion_pair(model, 3 * t + 2, squarable, cx, cy, cz, ax, ay, az, bx, by, bz)
-    if links:  # pair r as link s + r of K, u = X_i - (1 - t) X_a - t X_b with the foot's t held
-        l = model.spring_end.shape[1] + 3 * t
-        _set_link(forces, l, a, b, c, 1.0, ta - 1.0, -ta, rax, ray, raz, da, ha, la)
-        _set_link(forces, l + 1, b, c, a, 1.0, tb - 1.0, -tb, rbx, rby, rbz, db, hb, lb)
-        _set_link(forces, l + 2, c, a, b, 1.0, tc - 1.0, -tc, rcx, rcy, rcz, dc, hc, lc)
+    ha, la, ta, rax, ray, raz, da = _repulsion_pair(pairs, 3 * t, squarable, ax, ay, az, bx, by, bz, cx, cy, cz)
+    hb, lb, tb, rbx, rby, rbz, db = _repulsion_pair(pairs, 3 * t + 1, squarable, bx, by, bz, cx, cy, cz, ax, ay, az)
+    hc, lc, tc, rcx, rcy, rcz, dc = _repulsion_pair(pairs, 3 * t + 2, squarable, cx, cy, cz, ax, ay, az, bx, by, bz)
+    if write_links:  # pair r as link s + r of K, u = X_i - (1 - t) X_a - t X_b with the foot's t held
+        l = first_link + 3 * t
+        _set_link(links, l, a, b, c, 1.0, ta - 1.0, -ta, rax, ray, raz, da, ha, la)
+        _set_link(links, l + 1, b, c, a, 1.0, tb - 1.0, -tb, rbx, rby, rbz, db, hb, lb)
+        _set_link(links, l + 2, c, a, b, 1.0, tc - 1.0, -tc, rcx, rcy, rcz, dc, hc, lc)
     stiffness[0, t] = ha
     stiffness[1, t] = hb
     stiffness[2, t] = hc
@@ -437,18 +466,19 @@ def _edge_repulsion_forces(model, xp, forces):
     if not model.edge_repulsion:
         return
     corner, out, stiffness = model.corner, forces.corner_force, forces.corner_stiffness
+    pairs, links, first_link = _repulsion_fields(model), _links(forces), model.spring_end.shape[1]
     # one loop per kind of exponent: the compiler takes a test out of a loop only when
     # the loop is small, and this one runs on vector lanes only without the general pow
     squarable = _squarable(model.repulsion_nonlinearity - 1.0)
     if model.implicit:  # writing the links keeps a loop off the vector lanes anyway
         for t in prange(corner.shape[1]):
-            _repulsion_triangle(model, xp, t, squarable, out, stiffness, forces, True)
+            _repulsion_triangle(pairs, xp, t, squarable, out, stiffness, links, first_link, True)
     elif squarable:
         for t in prange(corner.shape[1]):
-            _repulsion_triangle(model, xp, t, True, out, stiffness, forces, False)
+            _repulsion_triangle(pairs, xp, t, True, out, stiffness, links, first_link, False)
     else:
         for t in prange(corner.shape[1]):
-            _repulsion_triangle(model, xp, t, False, out, stiffness, forces, False)
+            _repulsion_triangle(pairs, xp, t, False, out, stiffness, links, first_link, False)
     _scatter_corners(model, forces)
 
 
@@ -456,9 +486,9 @@ def _edge_repulsion_forces(model, xp, forces):
 def _scatter_corners(model, forces):
     """Each triangle's corner forces and stiffness (``_edge_repulsion_forces``) added to
     its vertices, by ``CHUNKS`` fixed slices of the triangles (``_gather_parts``)."""
-    corner, out, corner_stiffness = model.corner, forces.corner_force, forces.corner_stiffness
+    corner, out, corner_stiffness, parts = model.corner, forces.corner_force, forces.corner_stiffness, forces.part
     for c in prange(CHUNKS):
-        part = forces.part[c]
+        part = parts[c]
         first, stop = _chunk(c, corner.shape[1])
         for t in range(first, stop):
             for k in range(3):
@@ -490,11 +520,12 @@ def _bending_forces(model, xp, control, forces):
     if model.bending == 0.0:
         return
     offset = model.spring_indices.shape[0] + model.repulsion_vertex.shape[0]
-    kb = model.bending
-    node_of, weight_of, axis, along, across = forces.node, forces.weight, forces.axis, forces.along, forces.across
+    kb, hinge, hinge_weight, target = model.bending, model.hinge, model.hinge_weight, control.target
+    node_of, weight_of, axis, along, across = _links(forces)
+    parts = forces.part
     for c in prange(CHUNKS):
-        part = forces.part[c]
-        first, end = _chunk(c, model.hinge.shape[0])
+        part = parts[c]
+        first, end = _chunk(c, hinge.shape[0])
         for e in range(first, end):
             l = offset + e
             # the bend w · U summed over the differences U = X - target, not as w · X - w · target
@@ -504,20 +535,20 @@ def _bending_forces(model, xp, control, forces):
             by = 0.0
             bz = 0.0
             for k in range(4):
-                node = model.hinge[e, k]
-                w = model.hinge_weight[e, k]
+                node = hinge[e, k]
+                w = hinge_weight[e, k]
                 part[node, 3] -= kb * w * w
                 node_of[l, k] = node
                 weight_of[l, k] = w
-                bx += w * (xp[node, 0] - control.target[node, 0])
-                by += w * (xp[node, 1] - control.target[node, 1])
-                bz += w * (xp[node, 2] - control.target[node, 2])
+                bx += w * (xp[node, 0] - target[node, 0])
+                by += w * (xp[node, 1] - target[node, 1])
+                bz += w * (xp[node, 2] - target[node, 2])
             axis[l, 0] = 1.0
             axis[l, 1] = 0.0
             axis[l, 2] = 0.0
             along[l] = kb
             across[l] = kb
-            _link_spread(forces, l, -kb, bx, by, bz, part)  # F = -k_b w (w · U)
+            _link_spread(node_of, weight_of, l, -kb, bx, by, bz, part)  # F = -k_b w (w · U)
     _gather_parts(forces)
 
 
@@ -558,21 +589,37 @@ def _falloff(ox, oy, oz, ix, iy, iz, px, py, pz, cos_zone, r, r_max):
     return (cos_beta - cos_zone) / (1.0 - cos_zone) * _radial(dist, r, r_max)
 
 
+@njit(**dict(NUMBA_OPTIONS, inline="always"))
+def _muscle_fields(model):
+    """What the muscles' flood fills read of the model (module docstring)."""
+    return (model.muscle_kind, model.muscle_axes, model.muscle_insertion, model.muscle_cos_zone, model.muscle_r,
+            model.muscle_r_max, model.neighbour_start, model.neighbour_index)
+
+
+@njit(**dict(NUMBA_OPTIONS, inline="always"))
+def _ring_fields(model):
+    """What the back-projection reads of the model, each vertex's one-ring (module docstring)."""
+    return model.ring_start, model.ring_a, model.ring_b, model.neighbour_start, model.neighbour_index
+
+
 @njit(**NUMBA_OPTIONS)
-def _delta(model, m, origin, insertion_point, px, py, pz):
-    """δ of muscle m at point P: eq. 3.4 for a linear muscle; for a sphincter, δ_R of
-    eq. 3.3 in the elliptical radius ρ = |((u - u_c) / a, (v - v_c) / b)| (1 on its ring)."""
-    if model.muscle_kind[m] == SPHINCTER:
-        du = (px - origin[m, 0]) / model.muscle_axes[m, 0]
-        dv = (py - origin[m, 1]) / model.muscle_axes[m, 1]
-        return _radial(math.sqrt(du * du + dv * dv), model.muscle_r[m], model.muscle_r_max[m])
+def _delta(muscles, m, origin, insertion_point, px, py, pz):
+    """δ of muscle m (``_muscle_fields``) at point P: eq. 3.4 for a linear muscle; for a
+    sphincter, δ_R of eq. 3.3 in the elliptical radius ρ = |((u - u_c) / a, (v - v_c) / b)|
+    (1 on its ring)."""
+    kind, axes, cos_zone, r, r_max = muscles[0], muscles[1], muscles[3], muscles[4], muscles[5]
+    if kind[m] == SPHINCTER:
+        du = (px - origin[m, 0]) / axes[m, 0]
+        dv = (py - origin[m, 1]) / axes[m, 1]
+        return _radial(math.sqrt(du * du + dv * dv), r[m], r_max[m])
     return _falloff(origin[m, 0], origin[m, 1], origin[m, 2], insertion_point[m, 0], insertion_point[m, 1],
-                    insertion_point[m, 2], px, py, pz, model.muscle_cos_zone[m], model.muscle_r[m], model.muscle_r_max[m])
+                    insertion_point[m, 2], px, py, pz, cos_zone[m], r[m], r_max[m])
 
 
 @njit(**NUMBA_OPTIONS)
-def _back_project(model, i, fu, fv, uv, xp, out):
-    """Eq. 3.22-3.25: carry the 2D force (fu, fv) at vertex i onto the mesh.
+def _back_project(ring, i, fu, fv, uv, xp, out):
+    """Eq. 3.22-3.25: carry the 2D force (fu, fv) at vertex i onto the mesh, its one-ring
+    in ``ring`` (``_ring_fields``).
 
     The one-ring triangle (i, a, b) whose 2D wedge contains the force is found by writing
     the force in the basis of its two 2D edges, f = α e_a + β e_b with α, β ≥ 0; the same
@@ -593,10 +640,11 @@ def _back_project(model, i, fu, fv, uv, xp, out):
     magnitude = math.sqrt(fu * fu + fv * fv)
     if magnitude == 0.0:
         return False
+    ring_start, ring_a, ring_b = ring[0], ring[1], ring[2]
     ui, vi = uv[i, 0], uv[i, 1]
-    for k in range(model.ring_start[i], model.ring_start[i + 1]):
-        a = model.ring_a[k]
-        b = model.ring_b[k]
+    for k in range(ring_start[i], ring_start[i + 1]):
+        a = ring_a[k]
+        b = ring_b[k]
         au = uv[a, 0] - ui
         av = uv[a, 1] - vi
         bu = uv[b, 0] - ui
@@ -622,11 +670,11 @@ def _back_project(model, i, fu, fv, uv, xp, out):
         for d in range(3):
             out[d] *= magnitude / norm
         return True
-    return _between_edges(model, i, fu, fv, uv, xp, out)  # no wedge, or exactly along an edge
+    return _between_edges(ring, i, fu, fv, uv, xp, out)  # no wedge, or exactly along an edge
 
 
 @njit(**NUMBA_OPTIONS)
-def _between_edges(model, i, fu, fv, uv, xp, out):
+def _between_edges(ring, i, fu, fv, uv, xp, out):
     """A force f at vertex i that no 2D wedge holds (it leaves the mesh at the boundary,
     or points into the gap of a folded one-ring), between the edges nearest it on either
     side, e_p clockwise and e_q counter-clockwise (2D): kept as
@@ -640,8 +688,9 @@ def _between_edges(model, i, fu, fv, uv, xp, out):
     from_p = 2.0 * math.pi
     p = -1
     q = -1
-    for k in range(model.neighbour_start[i], model.neighbour_start[i + 1]):
-        j = model.neighbour_index[k]
+    neighbour_start, neighbour_index = ring[3], ring[4]
+    for k in range(neighbour_start[i], neighbour_start[i + 1]):
+        j = neighbour_index[k]
         eu = uv[j, 0] - uv[i, 0]
         ev = uv[j, 1] - uv[i, 1]
         turn = _turn(fu, fv, eu, ev)
@@ -685,9 +734,9 @@ def _add_along_edge(xp, i, j, length, out):
 
 
 @njit(**NUMBA_OPTIONS)
-def _fill(model, m, origin, insertion_point, points, visited, stack, stamp, region, delta):
-    """The stack-based flood fill of section 3.3 for muscle m, over ``points`` (in the
-    muscles' frame): start at the insertion, pop a vertex, evaluate its δ (eq. 3.4), and
+def _fill(muscles, m, origin, insertion_point, points, visited, stack, stamp, region, delta):
+    """The stack-based flood fill of section 3.3 for muscle m (``_muscle_fields``), over
+    ``points`` (in the muscles' frame): start at the insertion, pop a vertex, evaluate its δ (eq. 3.4), and
     push its neighbours only when δ is not negligible. Writes the region's vertices and
     their δ into ``region`` and ``delta``, as many as they hold, and returns how many there
     are (more than they hold: the region did not fit); ``visited`` and ``stack`` (n,) are
@@ -695,7 +744,8 @@ def _fill(model, m, origin, insertion_point, points, visited, stack, stamp, regi
     stamp[0] += 1
     mark = stamp[0]
     room = region.shape[0]
-    start = model.muscle_insertion[m]
+    neighbour_start, neighbour_index = muscles[6], muscles[7]
+    start = muscles[2][m]
     count = 0
     top = 0
     stack[0] = start
@@ -703,15 +753,15 @@ def _fill(model, m, origin, insertion_point, points, visited, stack, stamp, regi
     while top >= 0:
         i = stack[top]
         top -= 1
-        d = _delta(model, m, origin, insertion_point, points[i, 0], points[i, 1], points[i, 2])
+        d = _delta(muscles, m, origin, insertion_point, points[i, 0], points[i, 1], points[i, 2])
         if d <= NEGLIGIBLE_DELTA:
             continue
         if count < room:
             region[count] = i
             delta[count] = d
         count += 1
-        for k in range(model.neighbour_start[i], model.neighbour_start[i + 1]):
-            j = model.neighbour_index[k]
+        for k in range(neighbour_start[i], neighbour_start[i + 1]):
+            j = neighbour_index[k]
             if visited[j] != mark:
                 visited[j] = mark
                 top += 1
@@ -723,7 +773,7 @@ def _fill(model, m, origin, insertion_point, points, visited, stack, stamp, regi
 def _region_of_influence(model, m, origin, insertion_point, points, work):
     """Muscle m's region (``_fill``) into ``work.region`` and ``work.delta``, with the
     first slice's marks; returns its size."""
-    return _fill(model, m, origin, insertion_point, points, work.visited[0], work.stack[0], work.stamp[0:1],
+    return _fill(_muscle_fields(model), m, origin, insertion_point, points, work.visited[0], work.stack[0], work.stamp[0:1],
                  work.region, work.delta)
 
 
@@ -738,14 +788,15 @@ def _find_regions(model, control, points, work):
     keeps its count of -1 (``_muscle_forces`` finds it alone)."""
     visited, stack, stamp, kept = work.visited, work.stack, work.stamp, work.kept  # written by local names (module docstring)
     first, count, vertices, deltas = work.region_first, work.region_count, work.kept_vertex, work.kept_delta
+    muscles, activation, origin, insertion_point = _muscle_fields(model), control.activation, control.origin, control.insertion_point
     share = vertices.shape[0] // CHUNKS
     for c in prange(CHUNKS):
         base = c * share
-        for m in range(c, model.muscle_kind.shape[0], CHUNKS):
-            if control.activation[m] == 0.0 or count[m] >= 0:
+        for m in range(c, muscles[0].shape[0], CHUNKS):
+            if activation[m] == 0.0 or count[m] >= 0:
                 continue
             used = kept[c]
-            found = _fill(model, m, control.origin, control.insertion_point, points, visited[c], stack[c],
+            found = _fill(muscles, m, origin, insertion_point, points, visited[c], stack[c],
                           stamp[c:c + 1], vertices[base + used:base + share], deltas[base + used:base + share])
             if found <= share - used:
                 first[m] = base + used
@@ -818,26 +869,30 @@ def _pull_region(model, m, a_m, region, delta, count, frame, xp, control, force)
     at activation a_m, back-projected (eq. 3.22-3.25) when the muscles act in the 2D
     projection, and the muscle's push along the rest normal (``_muscle_forces``). Each
     vertex is in a region once, so the slices write apart."""
+    pinned, normal, uv_projection, ring = model.pinned, model.rest_vertex_normal, model.uv_projection, _ring_fields(model)
+    origin = control.origin[m]
+    pull = a_m * model.muscle_force[m]
+    protrusion = model.muscle_protrusion[m]
     for c in prange(CHUNKS):
         f3 = np.empty(3)
         first, end = _chunk(c, count)
         for k in range(first, end):
             i = region[k]
-            if model.pinned[i]:
+            if pinned[i]:
                 continue
             length = 0.0
             for d in range(3):
-                f3[d] = control.origin[m, d] - frame[i, d]
+                f3[d] = origin[d] - frame[i, d]
                 length += f3[d] ** 2
-            scale = a_m * model.muscle_force[m] * delta[k] / max(math.sqrt(length), LENGTH_EPS)  # eq. 3.1
-            if model.uv_projection:
-                _back_project(model, i, scale * f3[0], scale * f3[1], frame, xp, f3)
+            scale = pull * delta[k] / max(math.sqrt(length), LENGTH_EPS)  # eq. 3.1
+            if uv_projection:
+                _back_project(ring, i, scale * f3[0], scale * f3[1], frame, xp, f3)
             else:
                 for d in range(3):
                     f3[d] *= scale
-            push = a_m * model.muscle_force[m] * delta[k] * model.muscle_protrusion[m]
+            push = pull * delta[k] * protrusion
             for d in range(3):
-                force[i, d] += f3[d] + push * model.rest_vertex_normal[i, d]
+                force[i, d] += f3[d] + push * normal[i, d]
 
 
 @njit(**NUMBA_OPTIONS)

@@ -85,11 +85,11 @@ def _forces(model, xp, control, work, forces):
 @njit(**PARALLEL_OPTIONS)
 def _predict(model, state, control, h, xp):
     """X* = X + Δt V (eq. 3.14); a pinned vertex is where its bone holds it."""
-    x, v = state.x, state.v
+    x, v, pinned, target = state.x, state.v, model.pinned, control.target
     for i in prange(x.shape[0]):
         for d in range(3):
-            if model.pinned[i]:
-                x[i, d] = control.target[i, d]
+            if pinned[i]:
+                x[i, d] = target[i, d]
                 xp[i, d] = x[i, d]
             else:
                 xp[i, d] = x[i, d] + h * v[i, d]
@@ -100,16 +100,17 @@ def _quasi_implicit_step(model, state, control, h, xp, work, forces):
     """One step of the thesis's update (module docstring), in place."""
     _predict(model, state, control, h, xp)
     _forces(model, xp, control, work, forces)
-    x, v, m = state.x, state.v, model.mass
+    x, v, m, pinned = state.x, state.v, model.mass, model.pinned
+    force, stiffness, damping = forces.force, forces.stiffness, forces.damping
     for i in prange(x.shape[0]):
-        if model.pinned[i]:
+        if pinned[i]:
             for d in range(3):
                 v[i, d] = 0.0
             continue
-        k = forces.stiffness[i]
-        denominator = max(m + h * forces.damping[i] - h * h * k, m)  # eq. 3.19
+        k = stiffness[i]
+        denominator = max(m + h * damping[i] - h * h * k, m)  # eq. 3.19
         for d in range(3):
-            v[i, d] = (m * v[i, d] + h * forces.force[i, d] - h * h * k * v[i, d]) / denominator
+            v[i, d] = (m * v[i, d] + h * force[i, d] - h * h * k * v[i, d]) / denominator
             x[i, d] += h * v[i, d]  # eq. 3.16
     kernels._contacts(model, state)
 
@@ -122,14 +123,14 @@ def _stiffness_product(forces, p, out):
         for d in range(3):
             out[i, d] = forces.diagonal[i] * p[i, d]
     for l in range(forces.along.shape[0]):
-        ux, uy, uz = kernels._link_extension(forces, l, p)
+        ux, uy, uz = kernels._link_extension(forces.node, forces.weight, l, p)
         ax, ay, az = forces.axis[l, 0], forces.axis[l, 1], forces.axis[l, 2]
         across = forces.across[l]
         projection = (forces.along[l] - across) * (ax * ux + ay * uy + az * uz)
         bx = across * ux + projection * ax
         by = across * uy + projection * ay
         bz = across * uz + projection * az
-        kernels._link_spread(forces, l, 1.0, bx, by, bz, out)
+        kernels._link_spread(forces.node, forces.weight, l, 1.0, bx, by, bz, out)
 
 
 @njit(**NUMBA_OPTIONS)
