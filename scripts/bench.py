@@ -587,104 +587,107 @@ def profile(repeats: int) -> tuple[str, dict]:
 ANALYSIS = """### Where the targets stand: the missed ones and what would close them, and how the others were met
 
 The per-step profile above (each kernel looped in compiled code, so no call overhead) names
-where a step's time goes.
+where a step's time goes. **The machine moves the figures more than the code does.** This
+run is on an AMD EPYC (Zen 4, 2 cores); the run of 2026-12-02 was on an Intel Xeon. On
+this machine on 2026-12-03, the commit before that day's change (8ff25c5) simulated happy
+on the Hopper face in 18-27 ms by the thesis's update (the Xeon: 9.25-11.7 ms), and
+llvmpipe drew the head's 512² frame in 34 ms (the Xeon: 17-19). The three targets met on
+the Xeon that this run misses (`prange` 1.71x there, 34.8 frames per second, 2.64 s for a
+fresh render) are missed for that reason; the code that met them is the same.
 
 - **Simulation, 2 ms for happy on the Hopper face.** Not met: the thesis's update takes
-  four steps a frame, 140 steps of about 80 µs (170 ns per vertex-step, as above); the
+  four steps a frame, 140 steps of about 130 µs here (60-80 µs on the Xeon); the
   implicit solver one step a frame, but its step is the force terms, their links of K
   (a scalar loop of their own) and about eight conjugate-gradient iterations, each a
   product over the links as costly as the springs and the repulsion together (the
-  profile). 2 ms is 14 µs per step of the thesis's update, 30 ns per vertex-step. What
-  would close it: the product over the links in the same two passes on vector lanes
-  (each link's block applied in rows, then scattered) and the muscles' back-projection
-  on vector lanes. Not fewer iterations by the head's preconditioner: the Hopper face's
-  system at rest factorised (60,275 entries) made happy 26.6 ms against Jacobi's 22.0
-  (measured on 2026-12-02), each iteration's two triangular solves costing more than
-  the iterations they save.
-- **10 million vertex-steps per second per core at 28k vertices.** Not met (the scaling
-  table: the thesis's step, Loop-subdivided face). Profiled on 2026-12-02 at 27,614
-  vertices, one thread, per vertex-step: the muscles 72 ns (the back-projection of eq.
-  3.22-3.25, about 80 ns per vertex of each active muscle's region: a 2x2 solve for each
-  of the six or so wedges of its one-ring, then a square root and divisions for the wedge
-  that holds the force; and the muscles' frame, an atan2 at every vertex, 12 ns), the
-  edge repulsion 51 ns, the springs 31 ns. The springs and the pairs take two passes
-  over structure-of-arrays (facesim.kernels): the per-spring and per-triangle loops run on
-  vector lanes (8 doubles, AVX-512), which made them 35 -> 31 and 103 -> 51 ns and the
-  whole step 227 -> 164-170 ns (4.3 -> 5.9-6.1 million per second), and the scatter to the
-  vertices stays scalar (the springs' vector loop is 9 ns a vertex of their 31). Tried
-  and not kept, measured the same day: each vertex gathering its springs from its
-  one-ring instead of the scatter (20 ns against 13: two indirections per neighbour),
-  and the back-projection without branches, every wedge weighted (1.7 times slower).
-  The vertex order is not the limit: reordered by scipy's reverse Cuthill-McKee (with
-  the triangles sorted to match, or not), the step cost the same within 3% at 27,614 and
-  109,758 vertices, on one thread and two. What would close it: the back-projection on
-  vector lanes (the region's wedges in rows, the holding wedge found by sign tests), the
-  link loops in float32 (16 lanes), and the slices' buffers summed once per step where
-  each term sums them now.
-- **`prange`, 2 threads against 1.** The springs, the edge repulsion, the bending, the
-  muscles' flood fills (section 3.3; the muscles split by fixed slices,
+  profile). 2 ms is 14 µs per step of the thesis's update, 30 ns per vertex-step. A step
+  of the 468-vertex face also starts about 17 parallel regions (one per parallel loop,
+  one per active muscle), 0.9 µs each on one thread here. What would close it: the
+  product over the links in the same two passes on vector lanes (each link's block
+  applied in rows, then scattered), and fewer, fused loops per step. Not fewer
+  iterations by the head's preconditioner: the Hopper face's system at rest factorised
+  (60,275 entries) made happy 26.6 ms against Jacobi's 22.0 (2026-12-02), each
+  iteration's two triangular solves costing more than the iterations they save.
+- **10 million vertex-steps per second per core at 28k vertices.** Not met: 2.7 million
+  here (373 ns per vertex-step at 27,614, the scaling table), 7.1-7.5 million on the Xeon
+  on 2026-12-02 (134-141 ns, after that day's changes). Profiled there at 27,614
+  vertices, one thread, per vertex-step: the muscles 47 ns (their frame 4.5; the flood
+  fills of section 3.3, 11, about 22 per region vertex, since the thesis's regions move
+  with the skin and are found again at every step; the pull with its back-projection of
+  eq. 3.22-3.25, 25, about 55 per region vertex, 0.49 region vertices per vertex), the
+  edge repulsion 42 (its vector loop 25, the scatter and sum 17), the springs 26 (9 and
+  17), the hypodermis 3. The springs and the pairs take two passes over
+  structure-of-arrays (facesim.kernels): the per-spring and per-triangle loops run on
+  vector lanes (4 doubles: the Xeon's loops use 256-bit registers, and Numba's
+  "-prefer-256-bit" switched off gave no 512-bit ones), the scatter to the vertices
+  stays scalar. Changes of 2026-12-02: the muscles' frame takes its atan2 on vector lanes
+  (facesim's own, kernels._atan2, NumPy's to 4e-15: 11 -> 4.5 ns a vertex), the
+  back-projection tests each wedge by signs before dividing (69 -> 59 ns a region
+  vertex), and a vertex's force and stiffness scatter side by side (36.0 -> 33.3 ns).
+  Tried and not kept, measured the same day: the back-projection's edge angles by that
+  atan2 (the pull 4 times slower: the call is then not inlined), the back-projection
+  without branches (93 ns against 69), the kernels compiled without `parallel` (195 ns
+  against 141: the parallel loops compile to better code, and their starts are not the
+  limit), Intel's SVML (llvmlite here is not built for it); earlier, each vertex gathering
+  its springs from its one-ring (20 ns against 13) and a reverse Cuthill-McKee order
+  (within 3%). What would close it, 134 -> 100 ns on the Xeon: the thesis's regions kept
+  while the skin under them moves less than a tolerance (the fills' 11 ns), the link
+  loops in float32 (8 lanes), and one scatter and sum for the springs, the pairs and the
+  hinges together where each sums its own now (about 5 ns).
+- **`prange`, 2 threads against 1: not met here (1.58x at 27,614, 1.71x at 6,990); met
+  on the Xeon (1.71x at 27,614 on 2026-12-02).** The springs, the edge repulsion, the
+  bending, the muscles' flood fills (the muscles split by fixed slices,
   kernels._find_regions) and each muscle's region loop run on every core for a mesh of
   at least 4,000 vertices (facesim.config.PARALLEL_FROM), scattering by fixed slices into
   buffers of their own so the bits do not depend on the thread count
-  (tests/test_kernels.py, for kept regions and for the thesis's, found at every step).
-  Profiled at 27,614 vertices on 2026-12-02: springs 1.77x, repulsion 1.99x, muscles
-  1.78x (1.57x while their flood fills, 0.4 ms a step, ran on one core), the whole
-  quasi-implicit step 1.92x (1.72x); the whole run in the scaling table adds the
-  per-frame checks (0.7 ms a frame, one core) and the calls' overheads. The 468-vertex
-  faces run these loops on one thread, where a parallel region's start (0.5 µs on one
-  thread, 1.5 µs on two) outweighs its share of a 100 µs step; and during a render
-  Mesa's llvmpipe already runs on both cores.
-- **The head's frame against its floor, 1.2x.** The floor draws the same scene with the
-  same renderer and antialiasing and uploads vertex arrays computed before the clock
-  starts, so what is over it is facesim's per-frame work. Profiled on 2026-12-02 at 512²
-  (happy, EGL, warm; 22-24 ms a frame): drawing and reading back 17-19 ms, the edge
-  filter 1.3 ms (in the floor too), the head's skin carried from the simulated mesh (the
-  follow's sparse product, now compiled and on both cores, facesim.figure._followed)
-  0.9 ms looped and 1.6 ms between draws, the normals 0.4-0.7 ms, the nine parts'
-  vertex arrays written in place 0.3 ms (facesim.render._interleave; 1.0 ms when they
-  were stacked anew), the uploads 0.2 ms. Culling back faces made the draw a quarter
-  cheaper, so the same milliseconds weigh more against it; at 256² the draw is smaller
-  still. What would close it: the skin and normals of the next frame computed while
-  llvmpipe draws this one (a nogil kernel in a second thread), which at 512² is about
-  the 1-2 ms still over the bound.
-- **25 frames per second end to end on the head at 512², antialiased: met since
-  2026-12-02.** Two changes: antialiasing is a filter on the frame as drawn
-  (facesim.render._smooth_edges, the sub-pixel pass of FXAA: a pixel at an edge is
-  blended toward its neighbour across it), where drawing four times the pixels cost 30
-  ms more a frame (against the 4-samples frame the filtered one is 44.3 dB, the
-  unfiltered 41.5 dB; at 256²: 40.7 against 38.7, tests/test_head.py; `--supersample`
-  keeps the 4 samples); and the head's opaque parts cull their back faces (the
-  eyelashes, cards, stay two-sided), 12-15% of a frame, the frames differing only where
-  a back face peeked past a silhouette (a few pixels of a few frames). The rest of a
-  frame is Mesa's software rasteriser: 26,719 vertices in nine materials through
-  facesim's lit shader (pyrender's BRDF without the light types facesim does not use).
-  Multisampling costs more in llvmpipe (108 ms at 512² with 2 or 4 samples, measured on
-  2026-12-01). Tried then: the skin drawn first, so that the depth test discards the
-  teeth and mouth behind it, gains nothing measurable.
-- **3 s for `facesim render` in a fresh process: met on a quiet machine, at its edge on a
-  busy one.** 2.64 s (2.55-2.88) in the run above; 2.79-3.05 s in three runs earlier on
-  2026-12-02, where the commits before and after that day's last changes, run
-  alternately, took 3.30 and 3.29 s (medians of 6): the machine moves more than the
-  code. Tried on 2026-12-02: the head mask's mirror map (an optimal assignment with
-  SciPy's import, 0.3 s under a profiler) kept in facesim's cache, no measurable change
-  (2.62-2.70 against 2.66-2.75 s), because trimesh, which pyrender needs anyway, imports
-  the same parts of SciPy. What would give it room: the model's arrays in the on-disk cache (the
-  model is 0.6 s of it) and the GL context made in a thread while the model builds (0.3
-  s). Profiled on 2026-12-02 before the changes below (3.0-3.5 s wall), in order:
-  importing the command line 0.3 s; the model 0.6 s (with the imports of trimesh and SciPy it needs); the simulation 0.2 s
-  (Numba's cached kernels loaded); the head's figure 0.06 s; the GL context and scene
-  0.3 s; the 35 frames 1.2 s, encoding overlapped; then 0.3 s of the interpreter tearing
-  itself down (strace: no system call for 0.27 s after the last atexit handler), and
-  0.1 s importing matplotlib for one point-in-polygon test. facesim's command now
-  leaves by os._exit once its threads are joined, its atexit handlers run and its
-  streams flushed (facesim.cli.main), the lips' outline test is NumPy's, and the culled
-  back faces shorten the frames.
-- **50 ms for happy on the head.** Met on some machines of this kind and not on others:
-  38 ms on 2026-12-02 (an Intel Xeon), 52 ms on 2026-12-01 (an AMD EPYC), where the
-  Hopper face's same code took 22 and 35 ms. Side by side in one process (2026-12-01),
-  the head's tied rim (issue 16) costs 7% over a pinned one: 48.4 against 45.3 ms. The
-  profile above names the muscles' back-projection and the preconditioner as the
-  largest parts of a step.
+  (tests/test_kernels.py). Profiled on the Xeon at 27,614 vertices: springs 1.77x,
+  repulsion 1.99x, muscles 1.78x, the whole quasi-implicit step 1.92x; what the whole
+  run adds is serial: the per-frame checks (kernels._triangle_checks, 0.7 ms a frame
+  there, one core) and the calls' overheads. What would close it here: those checks on
+  both cores (not yet measured). The 468-vertex faces run their loops on one thread, where a parallel
+  region's start outweighs its share of the step; during a render llvmpipe already runs
+  on both cores.
+- **Compiling, measured apart.** Numba hands a parallel loop every tuple its body names,
+  whole; the model's 67 fields cost each loop about 3 s of compiling (a one-line loop:
+  3.9 s against 1.0 with its array taken out first). Since 2026-12-03 each term takes
+  out what it reads before its loop (facesim.kernels): every kernel compiled in 143 s ->
+  79 s on this machine (the compiling row above: 66 s, against 66 s on the Xeon before
+  the change), the test suite from a fresh clone 954 -> 717 s.
+- **The head's frame against its floor, 1.2x: met at 512² (1.17x), not at 256².** The
+  floor draws the same scene with the same renderer and antialiasing and uploads vertex
+  arrays computed before the clock starts, so what is over it is facesim's per-frame
+  work, a fixed few milliseconds that weigh more against the smaller frame. Profiled on
+  the Xeon at 512² (22-24 ms a frame): drawing and reading back 17-19 ms, the edge filter
+  1.3 ms (in the floor too), the head's skin carried from the simulated mesh (the
+  follow's sparse product, compiled and on both cores, facesim.figure._followed) 0.9 ms
+  looped and 1.6 ms between draws, the normals 0.4-0.7 ms, the nine parts' vertex arrays
+  written in place 0.3 ms (facesim.render._interleave), the uploads 0.2 ms. What would
+  close it: the skin and normals of the next frame computed while llvmpipe draws this
+  one (a nogil kernel in a second thread).
+- **25 frames per second end to end on the head at 512², antialiased: 24.0 here, 34.8 on
+  the Xeon (2026-12-02).** Here the floor alone, drawing and reading back, is 34 ms a
+  frame, so llvmpipe on this machine leaves no room for 25 per second whatever facesim
+  does; `--no-antialias` gives 24.5. What made it on the Xeon: antialiasing as a filter
+  on the frame as drawn (facesim.render._smooth_edges, the sub-pixel pass of FXAA),
+  where drawing four times the pixels cost 30 ms more a frame (against the 4-samples
+  frame the filtered one is 44.3 dB, the unfiltered 41.5 dB; tests/test_head.py;
+  `--supersample` keeps the 4 samples), and the head's opaque parts culling their back
+  faces (12-15% of a frame). Multisampling costs more in llvmpipe (108 ms at 512² with 2
+  or 4 samples, measured on 2026-12-01).
+- **3 s for `facesim render` in a fresh process: 3.60 s here, 2.64 s on the Xeon.**
+  Profiled there (3.0-3.5 s wall before the changes named): importing the command line
+  0.3 s; the model 0.6 s (with the imports of trimesh and SciPy it needs); the
+  simulation 0.2 s (Numba's cached kernels loaded); the head's figure 0.06 s; the GL
+  context and scene 0.3 s; the 35 frames 1.2 s, encoding overlapped; facesim's command
+  leaves by os._exit once its threads are joined and its streams flushed
+  (facesim.cli.main), which saves the interpreter's 0.3 s teardown. Here the frames
+  alone, at llvmpipe's 34 ms, take 1.2 s of drawing and 0.2 s of encoding. What would
+  give it room: the model's arrays in the on-disk cache (0.6 s) and the GL context made
+  in a thread while the model builds (0.3 s).
+- **50 ms for happy on the head: met, 45.8 ms here** (38 ms on the Xeon). Side by side in
+  one process (2026-12-01), the head's tied rim (issue 16) costs 7% over a pinned one.
+  The profile above names the muscles and the preconditioner as the largest parts of a
+  step.
 """
 
 
