@@ -641,12 +641,21 @@ fresh render) are missed for that reason; the code that met them is the same.
   at least 4,000 vertices (facesim.config.PARALLEL_FROM), scattering by fixed slices into
   buffers of their own so the bits do not depend on the thread count
   (tests/test_kernels.py). Profiled on the Xeon at 27,614 vertices: springs 1.77x,
-  repulsion 1.99x, muscles 1.78x, the whole quasi-implicit step 1.92x; what the whole
-  run adds is serial: the per-frame checks (kernels._triangle_checks, 0.7 ms a frame
-  there, one core) and the calls' overheads. What would close it here: those checks on
-  both cores (not yet measured). The 468-vertex faces run their loops on one thread, where a parallel
-  region's start outweighs its share of the step; during a render llvmpipe already runs
-  on both cores.
+  repulsion 1.99x, muscles 1.78x, the whole quasi-implicit step 1.92x. Profiled here
+  (2026-12-03, happy at frame 12, each term looped in compiled code, one thread and two):
+  springs 39 -> 28 ns a vertex (1.40x), edge repulsion 103 -> 65 (1.59x), muscles 74 ->
+  50 (1.49x), the whole step 307 -> 179 (1.71x); the whole run of five frames 1.59x, and
+  the bare steps of the same frames without the run's per-frame checks and copies cost
+  the same within this machine's noise, so what is serial around the steps is not the
+  limit here: each term scales less on this machine than on the Xeon. Its edge
+  repulsion is also 2.5 times the Xeon's per vertex where the springs are 1.5 times.
+  Both point to the machine's memory and its vector gathers rather than to the loops'
+  work (likely, not measured further: a step at 27,614 vertices moves more than 10 MB,
+  the corners' forces alone 3.9 MB, against 2 MB of L2 per core). What would close it:
+  fewer bytes per step (the link loops in float32, the corners' forces scattered without
+  their 9 x t buffer).
+  The 468-vertex faces run their loops on one thread, where a parallel region's start
+  outweighs its share of the step; during a render llvmpipe already runs on both cores.
 - **Compiling, measured apart.** Numba hands a parallel loop every tuple its body names,
   whole; the model's 67 fields cost each loop about 3 s of compiling (a one-line loop:
   3.9 s against 1.0 with its array taken out first). Since 2026-12-03 each term takes
