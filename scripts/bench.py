@@ -648,12 +648,15 @@ fresh render) are missed for that reason; the code that met them is the same.
   the bare steps of the same frames without the run's per-frame checks and copies cost
   the same within this machine's noise, so what is serial around the steps is not the
   limit here: each term scales less on this machine than on the Xeon. Its edge
-  repulsion is also 2.5 times the Xeon's per vertex where the springs are 1.5 times.
-  Both point to the machine's memory and its vector gathers rather than to the loops'
-  work (likely, not measured further: a step at 27,614 vertices moves more than 10 MB,
-  the corners' forces alone 3.9 MB, against 2 MB of L2 per core). What would close it:
-  fewer bytes per step (the link loops in float32, the corners' forces scattered without
-  their 9 x t buffer).
+  repulsion is also 2.5 times the Xeon's per vertex where the springs are 1.5 times:
+  its per-triangle loop alone, one thread, takes 85 ns a vertex on vector lanes against
+  97 compiled scalar (measured side by side in one process), where on the Xeon the
+  vector lanes halved it (to 25). So on this machine the loop gains little from its
+  vector lanes (their gathers of the corners' positions are the likely cost), and it
+  moves about 8 MB a call at under 4 GB/s, far from the memory's limit. What would close it:
+  a per-triangle loop that reads its corners contiguously (the positions copied per
+  triangle corner, or the triangles ordered so their corners are neighbours in memory),
+  and on both machines fewer bytes per step (the link loops in float32).
   The 468-vertex faces run their loops on one thread, where a parallel region's start
   outweighs its share of the step; during a render llvmpipe already runs on both cores.
 - **Compiling, measured apart.** Numba hands a parallel loop every tuple its body names,
