@@ -649,14 +649,17 @@ fresh render) are missed for that reason; the code that met them is the same.
   the same within this machine's noise, so what is serial around the steps is not the
   limit here: each term scales less on this machine than on the Xeon. Its edge
   repulsion is also 2.5 times the Xeon's per vertex where the springs are 1.5 times:
-  its per-triangle loop alone, one thread, takes 85 ns a vertex on vector lanes against
-  97 compiled scalar (measured side by side in one process), where on the Xeon the
-  vector lanes halved it (to 25). So on this machine the loop gains little from its
-  vector lanes (their gathers of the corners' positions are the likely cost), and it
-  moves about 8 MB a call at under 4 GB/s, far from the memory's limit. What would close it:
-  a per-triangle loop that reads its corners contiguously (the positions copied per
-  triangle corner, or the triangles ordered so their corners are neighbours in memory),
-  and on both machines fewer bytes per step (the link loops in float32).
+  its per-triangle loop alone, one thread, takes 85 ns a vertex here against 97 for the
+  same loop with its flags left to run time (measured side by side in one process),
+  where on the Xeon the vector lanes halved it (to 25). The reason is in the code LLVM
+  makes for this CPU (znver4): the loop stays scalar (vsqrtsd and vdivsd, no packed
+  square root or division), and stays scalar with its corners' positions and rest
+  distances first copied into contiguous rows (tried: 92 ns, the copy added), so it is
+  the compiler's cost model for this CPU, not gathers or memory (the loop moves about
+  8 MB a call at under 4 GB/s). What might close it, untried: the pairs' arithmetic
+  written on explicit lanes (4 triangles at a time in local arrays, for the SLP
+  vectoriser), or the compiler told the Xeon's vector width is wanted (its cost model
+  then overruled); on both machines, fewer bytes per step (the link loops in float32).
   The 468-vertex faces run their loops on one thread, where a parallel region's start
   outweighs its share of the step; during a render llvmpipe already runs on both cores.
 - **Compiling, measured apart.** Numba hands a parallel loop every tuple its body names,
