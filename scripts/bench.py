@@ -617,10 +617,11 @@ fresh render) are missed for that reason; the code that met them is the same.
   eq. 3.22-3.25, 25, about 55 per region vertex, 0.49 region vertices per vertex), the
   edge repulsion 42 (its vector loop 25, the scatter and sum 17), the springs 26 (9 and
   17), the hypodermis 3. The springs and the pairs take two passes over
-  structure-of-arrays (facesim.kernels): the per-spring and per-triangle loops run on
-  vector lanes (4 doubles: the Xeon's loops use 256-bit registers, and Numba's
-  "-prefer-256-bit" switched off gave no 512-bit ones), the scatter to the vertices
-  stays scalar. Changes of 2026-12-02: the muscles' frame takes its atan2 on vector lanes
+  structure-of-arrays (facesim.kernels), so that their per-spring and per-triangle loops
+  can run on vector lanes (read so on the Xeon from the 256-bit registers in their code;
+  not confirmed, and on this machine both compile to scalar arithmetic, below); the
+  scatter to the vertices is scalar. Changes of 2026-12-02: the muscles' frame takes its
+  atan2 without branches
   (facesim's own, kernels._atan2, NumPy's to 4e-15: 11 -> 4.5 ns a vertex), the
   back-projection tests each wedge by signs before dividing (69 -> 59 ns a region
   vertex), and a vertex's force and stiffness scatter side by side (36.0 -> 33.3 ns).
@@ -632,7 +633,7 @@ fresh render) are missed for that reason; the code that met them is the same.
   its springs from its one-ring (20 ns against 13) and a reverse Cuthill-McKee order
   (within 3%). What would close it, 134 -> 100 ns on the Xeon: the thesis's regions kept
   while the skin under them moves less than a tolerance (the fills' 11 ns), the link
-  loops in float32 (8 lanes), and one scatter and sum for the springs, the pairs and the
+  loops made to run on vector lanes for certain (here they do not) and in float32, and one scatter and sum for the springs, the pairs and the
   hinges together where each sums its own now (about 5 ns).
 - **`prange`, 2 threads against 1: not met here (1.58x at 27,614, 1.71x at 6,990); met
   on the Xeon (1.71x at 27,614 on 2026-12-02).** The springs, the edge repulsion, the
@@ -649,17 +650,18 @@ fresh render) are missed for that reason; the code that met them is the same.
   the same within this machine's noise, so what is serial around the steps is not the
   limit here: each term scales less on this machine than on the Xeon. Its edge
   repulsion is also 2.5 times the Xeon's per vertex where the springs are 1.5 times:
-  its per-triangle loop alone, one thread, takes 85 ns a vertex here against 97 for the
-  same loop with its flags left to run time (measured side by side in one process),
-  where on the Xeon the vector lanes halved it (to 25). The reason is in the code LLVM
-  makes for this CPU (znver4): the loop stays scalar (vsqrtsd and vdivsd, no packed
-  square root or division), and stays scalar with its corners' positions and rest
-  distances first copied into contiguous rows (tried: 92 ns, the copy added), so it is
-  the compiler's cost model for this CPU, not gathers or memory (the loop moves about
-  8 MB a call at under 4 GB/s). What might close it, untried: the pairs' arithmetic
-  written on explicit lanes (4 triangles at a time in local arrays, for the SLP
-  vectoriser), or the compiler told the Xeon's vector width is wanted (its cost model
-  then overruled); on both machines, fewer bytes per step (the link loops in float32).
+  its per-triangle loop alone, one thread, takes 85 ns a vertex here (25 on the Xeon)
+  against 97 for the same loop with its flags left to run time (side by side in one
+  process). Read from the code LLVM makes here, the pairs' loop and the springs' loop
+  are both scalar (vsqrtsd and vdivsd, no packed square root or division), with this
+  CPU's tuning (znver4) and with the Xeon's (skylake-avx512) alike, and the pairs' loop
+  stays scalar with its corners' positions and rest distances first copied into
+  contiguous rows (tried: 92 ns, the copy added). The 2026-12-02 reading of "vector
+  lanes" on the Xeon came from its 256-bit registers, which scalar code here uses too,
+  so it is not confirmed; why the pairs lose more here than the springs is not
+  explained. What might close it, untried: the pairs' arithmetic written four
+  triangles at a time in local arrays, so that LLVM's SLP vectoriser packs it; on both
+  machines, fewer bytes per step (the link loops in float32).
   The 468-vertex faces run their loops on one thread, where a parallel region's start
   outweighs its share of the step; during a render llvmpipe already runs on both cores.
 - **Compiling, measured apart.** Numba hands a parallel loop every tuple its body names,
