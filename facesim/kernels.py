@@ -21,13 +21,16 @@ them, one line per term.
 
 The springs and the edge repulsion take two passes: a loop over their springs or
 triangles that computes each one's force into arrays of its own, reading the ends or
-corners by rows (``spring_end``, ``corner``: structure of arrays) so that the compiler
-runs it on vector lanes, then a loop adding those forces to the vertices. On one core at
-27,614 vertices that made the springs 35 -> 31 ns a vertex and the edge repulsion
-103 -> 51 (2026-12-02, AVX-512). What keeps the first loop on vector lanes: no call it
-cannot vectorise (the general pow: ``_power``, and one loop per kind of exponent), and no
-writes but its own outputs. The implicit step needs the links of K as well, whose
-writes keep a loop scalar; it takes a scalar loop that writes both (``_spring_links``,
+corners by rows (``spring_end``, ``corner``: structure of arrays), then a loop adding
+those forces to the vertices. On one core at 27,614 vertices that made the springs
+35 -> 31 ns a vertex and the edge repulsion 103 -> 51 (2026-12-02, an Intel Xeon). The
+first loop was written for vector lanes (no call, no general pow: ``_power``, one loop
+per kind of exponent, no writes but its own outputs), but read from the code LLVM makes
+for it (2026-12-03, an AMD EPYC, and with the skylake-avx512, icelake-server and
+sapphirerapids tunings alike) it is scalar: no packed square root or division, LLVM's
+remark "cannot identify array bounds" (the ends' positions are read through an index).
+What the two passes gained is the loops' shape, not lanes. The implicit step needs the
+links of K as well, in a loop that writes both (``_spring_links``,
 ``_repulsion_triangle`` with its links). On the Hopper face the implicit step's force
 terms take 112 µs a step so, 129 with a vector loop and a second loop for the links,
 and took 106 as one scalar loop per term that also scattered (measured on 2026-12-02).
@@ -186,9 +189,8 @@ def _power(base, exponent, squarable):
     """base ** exponent, by repeated squaring when ``squarable`` (``_squarable``: the
     thesis's γ = ζ = 5), several times faster than the general pow in the inner loops.
     The squarings are a fixed count of steps without a branch, and ``squarable`` is the
-    same for a whole loop, so the compiler takes the test out of the loop and runs the
-    loop on vector lanes (measured on 2026-12-02, the springs' loop alone at 27,614
-    vertices: 8 ns a vertex)."""
+    same for a whole loop, so the compiler can take the test out of the loop (measured
+    on 2026-12-02, the springs' loop alone at 27,614 vertices: 8 ns a vertex)."""
     if squarable:
         result = 1.0
         e = int(exponent)
@@ -318,7 +320,7 @@ def _spring_forces(model, xp, forces):
     """Springs on the mesh edges, eq. 3.6, at the predicted positions: F_i = g (X_i* - X_j*),
     its g into both ends' stiffness (eq. 3.17), and, for the implicit step, spring s as
     link s of K. Two passes: every spring's g into ``tension``, in a loop over the rows
-    of the springs' ends (``spring_end``) that runs on vector lanes (for the implicit
+    of the springs' ends (``spring_end``) (for the implicit
     step, ``_spring_links``, which also writes the links); then each spring's force added
     to its ends (``_scatter_springs``)."""
     tension, springs = forces.tension, _spring_fields(model)
@@ -460,7 +462,7 @@ def _edge_repulsion_forces(model, xp, forces):
     corners a, b, c against (b, c), (c, a), (a, b), facesim.model) give each corner its
     own R and its shares of the reactions on the two edges it ends, into
     ``corner_force`` (9, t) and ``corner_stiffness`` (3, t), in a loop over the rows of
-    the triangles' corners that runs on vector lanes; then the corners' sums are added
+    the triangles' corners (module docstring); then the corners' sums are added
     to the vertices (``_scatter_corners``).
     """
     if not model.edge_repulsion:
@@ -468,9 +470,9 @@ def _edge_repulsion_forces(model, xp, forces):
     corner, out, stiffness = model.corner, forces.corner_force, forces.corner_stiffness
     pairs, links, first_link = _repulsion_fields(model), _links(forces), model.spring_end.shape[1]
     # one loop per kind of exponent: the compiler takes a test out of a loop only when
-    # the loop is small, and this one runs on vector lanes only without the general pow
+    # the loop is small, and the general pow is a call in every pair
     squarable = _squarable(model.repulsion_nonlinearity - 1.0)
-    if model.implicit:  # writing the links keeps a loop off the vector lanes anyway
+    if model.implicit:  # a loop that also writes the links
         for t in prange(corner.shape[1]):
             _repulsion_triangle(pairs, xp, t, squarable, out, stiffness, links, first_link, True)
     elif squarable:
@@ -810,7 +812,7 @@ def _muscle_frame(model, xp, frame):
     length, u = R atan2(x - cx, z - cz), v = y (cm), written as 3D points (u, v, 0) so the
     falloff code serves both frames; or the 3D positions."""
     cx, cz, radius, uv_projection = model.axis_x, model.axis_z, model.radius, model.uv_projection
-    for i in prange(xp.shape[0]):  # on vector lanes (``_atan2``)
+    for i in prange(xp.shape[0]):  # no call to libm in it (``_atan2``)
         _frame_point(xp, i, cx, cz, radius, uv_projection, frame, i)
 
 
@@ -1015,8 +1017,10 @@ TAN_PI_8 = math.tan(math.pi / 8.0)
 
 @njit(**NUMBA_OPTIONS)
 def _atan2(y, x):
-    """atan2(y, x) without a branch or a call, so a loop of them runs on vector lanes
-    (math.atan2 is a call to libm, and Numba's vector maths library is not in its wheels):
+    """atan2(y, x) without a branch or a call (math.atan2 is a call to libm, and Numba's
+    vector maths library is not in its wheels), written for vector lanes, although LLVM
+    compiles the muscles' frame loop to scalar arithmetic (read from its code on
+    2026-12-03): the gain is the call and the branches saved:
     the ratio of the smaller to the larger magnitude, reduced to |r| ≤ tan(π/8) by
     atan r = π/4 + atan((r - 1) / (r + 1)), ``ARCTANGENT_SERIES``, then the octant.
     Within 4e-15 (relative) of numpy's arctan2, signed zeros aside."""
@@ -1038,8 +1042,8 @@ def _atan2(y, x):
 @njit(**NUMBA_OPTIONS)
 def _frame_point(x, i, axis_x, axis_z, radius, uv_projection, out, row):
     """Vertex i in the muscles' frame, into ``out[row]``: (R atan2(x - cx, z - cz), y, 0)
-    of eq. 3.21, or 3D. With ``_atan2`` a loop of them runs on vector lanes (the muscles'
-    frame, one core at 27,614 vertices: 11 -> 4.5 ns a vertex, 2026-12-02)."""
+    of eq. 3.21, or 3D. With ``_atan2`` instead of libm's (the muscles' frame, one core
+    at 27,614 vertices: 11 -> 4.5 ns a vertex, 2026-12-02)."""
     if uv_projection:
         out[row, 0] = radius * _atan2(x[i, 0] - axis_x, x[i, 2] - axis_z)
         out[row, 1] = x[i, 1]

@@ -618,8 +618,8 @@ fresh render) are missed for that reason; the code that met them is the same.
   edge repulsion 42 (its vector loop 25, the scatter and sum 17), the springs 26 (9 and
   17), the hypodermis 3. The springs and the pairs take two passes over
   structure-of-arrays (facesim.kernels), so that their per-spring and per-triangle loops
-  can run on vector lanes (read so on the Xeon from the 256-bit registers in their code;
-  not confirmed, and on this machine both compile to scalar arithmetic, below); the
+  could run on vector lanes (read so on the Xeon from the 256-bit registers in their
+  code, most likely wrongly: LLVM compiles both to scalar arithmetic, below); the
   scatter to the vertices is scalar. Changes of 2026-12-02: the muscles' frame takes its
   atan2 without branches
   (facesim's own, kernels._atan2, NumPy's to 4e-15: 11 -> 4.5 ns a vertex), the
@@ -633,7 +633,7 @@ fresh render) are missed for that reason; the code that met them is the same.
   its springs from its one-ring (20 ns against 13) and a reverse Cuthill-McKee order
   (within 3%). What would close it, 134 -> 100 ns on the Xeon: the thesis's regions kept
   while the skin under them moves less than a tolerance (the fills' 11 ns), the link
-  loops made to run on vector lanes for certain (here they do not) and in float32, and one scatter and sum for the springs, the pairs and the
+  loops brought onto vector lanes (they are scalar now) and in float32, and one scatter and sum for the springs, the pairs and the
   hinges together where each sums its own now (about 5 ns).
 - **`prange`, 2 threads against 1: not met here (1.58x at 27,614, 1.71x at 6,990); met
   on the Xeon (1.71x at 27,614 on 2026-12-02).** The springs, the edge repulsion, the
@@ -653,13 +653,15 @@ fresh render) are missed for that reason; the code that met them is the same.
   its per-triangle loop alone, one thread, takes 85 ns a vertex here (25 on the Xeon)
   against 97 for the same loop with its flags left to run time (side by side in one
   process). Read from the code LLVM makes here, the pairs' loop and the springs' loop
-  are both scalar (vsqrtsd and vdivsd, no packed square root or division), with this
-  CPU's tuning (znver4) and with the Xeon's (skylake-avx512) alike, and the pairs' loop
+  are both scalar (vsqrtsd and vdivsd, no packed square root or division) in the
+  compiled parallel loops themselves, with this CPU's tuning (znver4) and with Intel's
+  (skylake-avx512, icelake-server, sapphirerapids) alike; LLVM's remark: "cannot identify
+  array bounds" (the ends' positions are read through an index). The pairs' loop
   stays scalar with its corners' positions and rest distances first copied into
   contiguous rows (tried: 92 ns, the copy added). The 2026-12-02 reading of "vector
-  lanes" on the Xeon came from its 256-bit registers, which scalar code here uses too,
-  so it is not confirmed; why the pairs lose more here than the springs is not
-  explained. What might close it, untried: the pairs' arithmetic written four
+  lanes" on the Xeon came from its 256-bit registers, which scalar code uses too, and
+  was most likely wrong (facesim.kernels says so now); why the pairs lose more here than
+  the springs is not explained. What might close it, untried: the pairs' arithmetic written four
   triangles at a time in local arrays, so that LLVM's SLP vectoriser packs it; on both
   machines, fewer bytes per step (the link loops in float32).
   The 468-vertex faces run their loops on one thread, where a parallel region's start
