@@ -32,7 +32,7 @@ remark "cannot identify array bounds" (the ends' positions are read through an i
 What the two passes gained is the loops' shape, not lanes. The implicit step needs the
 links of K as well, in a loop that writes both (``_spring_links``,
 ``_repulsion_triangle`` with its links). On the Hopper face the implicit step's force
-terms take 112 µs a step so, 129 with a vector loop and a second loop for the links,
+terms take 112 µs a step so, 129 with the g-only loop and a second loop for the links,
 and took 106 as one scalar loop per term that also scattered (measured on 2026-12-02).
 Numba's cache does not see a change in a callee's file (facesim.config keys it by a hash
 of facesim's code).
@@ -50,7 +50,10 @@ and the model's 67 fields cost each loop about 3 s of compiling (a one-line loop
 against 1.0 with its one array taken out first) and 0.6 µs at each start. A term takes
 out what it reads before its loop, as locals or as a small tuple of its own
 (``_spring_fields``, ``_repulsion_fields``, ``_muscle_fields``, ``_ring_fields``,
-``_links``): compiling every kernel went 143 -> 79 s (2026-12-03, AMD EPYC).
+``_links``): compiling every kernel went 143 -> 79 s (2026-12-03, AMD EPYC). Those are
+plain tuples, read by position as each one's docstring lists: named tuples built inside
+a parallel kernel and handed to its loop crash Numba 0.68's array analysis (IndexError
+in _gen_shape_call; tried).
 
 A term adds, at the predicted positions X* (eq. 3.14), its force F_i and, where its force
 depends on X_i, the scalar stiffness K_i = Σ ∂F_i/∂X_i along the spring (the Σ g + Σ h of
@@ -296,7 +299,8 @@ def _gather_parts(forces):
 
 @njit(**dict(NUMBA_OPTIONS, inline="always"))
 def _spring_fields(model):
-    """What the springs read of the model (module docstring)."""
+    """What the springs read of the model (module docstring): their ends (2, s), rest
+    lengths, k0, exponent and length unit, in this order."""
     return model.spring_end, model.spring_rest_length, model.stiffness, model.nonlinearity, model.length_unit
 
 
@@ -336,8 +340,8 @@ def _spring_forces(model, xp, forces):
 @njit(**PARALLEL_OPTIONS)
 def _spring_links(springs, xp, squarable, forces):
     """Every spring's g into ``tension`` and spring s as link s of K (``Forces``), for the
-    implicit step: a loop of its own, since writing the links keeps a loop off the vector
-    lanes (measured), and the thesis's update needs only the g."""
+    implicit step: a loop of its own, so that the thesis's update, which needs only the
+    g, does not write the links."""
     tension, links = forces.tension, _links(forces)
     for s in prange(tension.shape[0]):
         i, j, dx, dy, dz, length, g, along = _spring(springs, xp, s, squarable)
@@ -387,7 +391,9 @@ def _tissue_forces(model, xp, control, forces):
 
 @njit(**dict(NUMBA_OPTIONS, inline="always"))
 def _repulsion_fields(model):
-    """What the edge repulsion reads of the model (module docstring)."""
+    """What the edge repulsion reads of the model (module docstring): the triangles'
+    corners (3, t), the pairs' rest distances, k0, exponent and length unit, in this
+    order."""
     return (model.corner, model.repulsion_rest_distance, model.stiffness, model.repulsion_nonlinearity,
             model.length_unit)
 
@@ -593,14 +599,17 @@ def _falloff(ox, oy, oz, ix, iy, iz, px, py, pz, cos_zone, r, r_max):
 
 @njit(**dict(NUMBA_OPTIONS, inline="always"))
 def _muscle_fields(model):
-    """What the muscles' flood fills read of the model (module docstring)."""
+    """What the muscles' flood fills read of the model (module docstring): kind, axes,
+    insertion, cos_zone, r, r_max, neighbour_start, neighbour_index, in this order."""
     return (model.muscle_kind, model.muscle_axes, model.muscle_insertion, model.muscle_cos_zone, model.muscle_r,
             model.muscle_r_max, model.neighbour_start, model.neighbour_index)
 
 
 @njit(**dict(NUMBA_OPTIONS, inline="always"))
 def _ring_fields(model):
-    """What the back-projection reads of the model, each vertex's one-ring (module docstring)."""
+    """What the back-projection reads of the model, each vertex's one-ring (module
+    docstring): ring_start, ring_a, ring_b, neighbour_start, neighbour_index, in this
+    order."""
     return model.ring_start, model.ring_a, model.ring_b, model.neighbour_start, model.neighbour_index
 
 
