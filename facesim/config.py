@@ -32,24 +32,52 @@ PROJECT_DIR = PACKAGE_DIR.parent
 
 
 def _key_numba_cache() -> None:
-    """Keep facesim's compiled kernels in a directory named by a hash of facesim's code.
+    """Keep facesim's compiled kernels in a directory named by a hash of facesim's code,
+    wherever facesim is installed.
 
     Numba's cache knows a kernel is stale only when the kernel's own file changes: a
     kernel of facesim.solver compiled with facesim.kernels' callees inlined is loaded
     again after kernels.py changes, and runs the old code (measured on 2026-12-02, a
-    ``git pull`` over an editable install would do the same). Under
-    ``$NUMBA_CACHE_DIR`` if set, else facesim's cache directory (facesim.cache), in
-    ``numba-<hash>``. Runs before any facesim kernel is decorated: every module that
-    compiles one takes its options from here."""
+    ``git pull`` over an editable install would do the same). And Numba files a kernel
+    under a hash of its file's directory, so the same code in a second checkout, a wheel
+    in a virtual environment or a clone elsewhere compiled everything again (about a
+    minute). So facesim's kernels are found by ``CodeKeyedLocator``, put first among
+    Numba's cache locators: under ``$NUMBA_CACHE_DIR`` if set, else facesim's cache
+    directory (facesim.cache), in ``numba-<hash of facesim's .py files>``, the same for
+    every copy of the same code. Numba's own check of each file's contents stays, and it
+    keys each entry by its CPU and Numba version. Runs before any facesim kernel is
+    decorated: every module that compiles one takes its options from here. Other
+    packages' kernels keep Numba's own locators."""
     import numba
+    from numba.core import caching
 
     from .cache import directory
 
     digest = hashlib.sha1()
     for path in sorted(PACKAGE_DIR.glob("*.py")):
         digest.update(path.name.encode() + b"\0" + path.read_bytes())
-    base = numba.config.CACHE_DIR or os.fspath(directory())
-    numba.config.CACHE_DIR = os.path.join(base, f"numba-{digest.hexdigest()[:16]}")
+    folder = f"numba-{digest.hexdigest()[:16]}"
+    provided = getattr(caching, "UserProvidedCacheLocator", None) or caching._UserProvidedCacheLocator
+
+    class CodeKeyedLocator(provided):
+        def __init__(self, py_func, py_file):
+            super().__init__(py_func, py_file)
+            self._cache_path = os.path.join(numba.config.CACHE_DIR or os.fspath(directory()), folder)
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            if Path(py_file).resolve().parent != PACKAGE_DIR or not os.path.exists(py_file):
+                return None
+            self = cls(py_func, py_file)
+            try:
+                self.ensure_cache_path()
+            except OSError:  # a read-only home: Numba's own locators, or no cache
+                return None
+            return self
+
+    implementation = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+    implementation._locator_classes = [CodeKeyedLocator] + [
+        c for c in implementation._locator_classes if c.__name__ != "CodeKeyedLocator"]
 
 
 _key_numba_cache()

@@ -52,3 +52,36 @@ def test_the_heads_skin_weights_read_from_the_cache_are_the_computed_ones(tmp_pa
     again_rows, again = figure.skin_follow(head)  # read
     assert np.array_equal(rows, again_rows) and (weights != again).nnz == 0
     assert weights.shape == (len(rows), len(head.landmarks)) and weights.nnz > 0
+
+
+COMPILED = """
+import numpy as np
+from facesim import kernels
+assert kernels._not_finite(np.array([[0.0, 1.0, 2.0], [3.0, np.nan, 5.0]])) == 1
+print(sum(kernels._not_finite.stats.cache_hits.values()), sum(kernels._not_finite.stats.cache_misses.values()))
+"""
+
+
+def test_a_copy_of_the_same_code_elsewhere_loads_the_compiled_kernels(tmp_path):
+    """A second checkout, a wheel in a virtual environment, a clone in CI: the same
+    facesim code anywhere finds the kernels another copy compiled (facesim.config's
+    CodeKeyedLocator; Numba alone files them by directory and compiled all again)."""
+    import shutil
+    import subprocess
+    import sys
+
+    from facesim.config import PACKAGE_DIR
+
+    copy = tmp_path / "elsewhere"
+    shutil.copytree(PACKAGE_DIR, copy / "facesim", ignore=shutil.ignore_patterns("__pycache__", "meshes", "expressions"))
+
+    def hits_and_misses(root):
+        env = dict(os.environ, PYTHONPATH=str(root), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+        result = subprocess.run([sys.executable, "-c", COMPILED], capture_output=True, text=True, env=env, cwd=tmp_path,
+                                timeout=300)
+        assert result.returncode == 0, result.stderr[-2000:]
+        return tuple(int(n) for n in result.stdout.split())
+
+    assert hits_and_misses(PACKAGE_DIR.parent) == (0, 1)  # compiled, into an empty cache
+    assert hits_and_misses(copy) == (1, 0)  # the copy loads it
+    assert [p.name.startswith("numba-") for p in (tmp_path / "cache").iterdir()] == [True]
