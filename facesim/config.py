@@ -43,17 +43,19 @@ def _key_numba_cache() -> None:
     in a virtual environment or a clone elsewhere compiled everything again (about a
     minute). So facesim's kernels are found by ``CodeKeyedLocator``, put first among
     Numba's cache locators: under ``$NUMBA_CACHE_DIR`` if set, else facesim's cache
-    directory (facesim.cache), in ``numba-<hash of facesim's .py files>``, the same for
-    every copy of the same code. Numba's own check of each file's contents stays, and it
-    keys each entry by its CPU and Numba version. Runs before any facesim kernel is
-    decorated: every module that compiles one takes its options from here. Other
-    packages' kernels keep Numba's own locators."""
+    directory (facesim.cache), in ``numba-<hash of facesim's .py files and the
+    package's name>``, the same for every copy of the same code. Numba's own check of
+    each file's contents stays, and it keys each entry by its CPU and Numba version.
+    Runs before any facesim kernel is decorated: every module that compiles one takes
+    its options from here. Other packages' kernels keep Numba's own locators."""
     import numba
     from numba.core import caching
 
     from .cache import directory
 
-    digest = hashlib.sha1()
+    # the package's name too: a compiled kernel names the module it was compiled in, and
+    # the same code imported under another name (a vendored copy) cannot load it
+    digest = hashlib.sha1(__name__.rpartition(".")[0].encode() + b"\0")
     for path in sorted(PACKAGE_DIR.glob("*.py")):
         digest.update(path.name.encode() + b"\0" + path.read_bytes())
     folder = f"numba-{digest.hexdigest()[:16]}"

@@ -55,8 +55,9 @@ def test_the_heads_skin_weights_read_from_the_cache_are_the_computed_ones(tmp_pa
 
 
 COMPILED = """
+import importlib, sys
 import numpy as np
-from facesim import kernels
+kernels = importlib.import_module(sys.argv[1] + ".kernels")
 assert kernels._not_finite(np.array([[0.0, 1.0, 2.0], [3.0, np.nan, 5.0]])) == 1
 print(sum(kernels._not_finite.stats.cache_hits.values()), sum(kernels._not_finite.stats.cache_misses.values()))
 """
@@ -75,13 +76,16 @@ def test_a_copy_of_the_same_code_elsewhere_loads_the_compiled_kernels(tmp_path):
     copy = tmp_path / "elsewhere"
     shutil.copytree(PACKAGE_DIR, copy / "facesim", ignore=shutil.ignore_patterns("__pycache__", "meshes", "expressions"))
 
-    def hits_and_misses(root):
+    def hits_and_misses(root, package="facesim"):
         env = dict(os.environ, PYTHONPATH=str(root), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-        result = subprocess.run([sys.executable, "-c", COMPILED], capture_output=True, text=True, env=env, cwd=tmp_path,
-                                timeout=300)
+        result = subprocess.run([sys.executable, "-c", COMPILED, package], capture_output=True, text=True, env=env,
+                                cwd=tmp_path, timeout=300)
         assert result.returncode == 0, result.stderr[-2000:]
         return tuple(int(n) for n in result.stdout.split())
 
     assert hits_and_misses(PACKAGE_DIR.parent) == (0, 1)  # compiled, into an empty cache
     assert hits_and_misses(copy) == (1, 0)  # the copy loads it
     assert [p.name.startswith("numba-") for p in (tmp_path / "cache").iterdir()] == [True]
+    # the same code under another name compiles its own: a kernel names its module
+    (copy / "facesim").rename(copy / "vendored")
+    assert hits_and_misses(copy, "vendored") == (0, 1)
