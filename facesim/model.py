@@ -133,6 +133,7 @@ class Model:
     repulsion_vertex: np.ndarray  # (r,)
     repulsion_edge: np.ndarray  # (r, 2)
     repulsion_rest_distance: np.ndarray  # (r,)
+    corner_rest_distance: np.ndarray  # (3, t) the same by corner: pair 3t + k at (k, t), as corner
     hinge: np.ndarray  # (e, 4) interior edges' hinges: the edge's ends, then the two opposite vertices
     hinge_weight: np.ndarray  # (e, 4) their bending stencils (kernels._bending_forces)
     muscle_kind: np.ndarray  # (M,) LINEAR or SPHINCTER
@@ -262,6 +263,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         repulsion_vertex=repulsion_vertex,
         repulsion_edge=repulsion_edge,
         repulsion_rest_distance=altitude,
+        corner_rest_distance=altitude.reshape(-1, 3).T,
         hinge=hinge,
         hinge_weight=hinge_weight,
         muscle_kind=muscles.kind,

@@ -30,12 +30,13 @@ def assert_close(actual, expected, rtol=RTOL):
     assert np.abs(actual - expected).max() <= rtol * scale
 
 
+@pytest.mark.parametrize("implicit", [True, False])  # with the links of K, and the thesis's g alone
 @pytest.mark.parametrize("unit", [1.0, 0.5])
-def test_springs_match_reference(model, rng, unit):
+def test_springs_match_reference(model, rng, unit, implicit):
     x, xp = perturbed(model, rng)
     m = model.material
     forces = K.forces(model.arrays)
-    K._spring_forces(model.arrays._replace(length_unit=unit), xp, forces)
+    K._spring_forces(model.arrays._replace(length_unit=unit, implicit=implicit), xp, forces)
     # the thesis's Σ g (X_i - X_j*) at X = X* is the force at X*
     ref_stiff, ref_force = naive.spring_terms(xp, xp, model.spring_indices, model.spring_rest_length, m.stiffness,
                                               m.nonlinearity, unit)
@@ -43,12 +44,14 @@ def test_springs_match_reference(model, rng, unit):
     assert_close(forces.force, ref_force)
 
 
+@pytest.mark.parametrize("implicit", [True, False])
 @pytest.mark.parametrize("zeta", [5.0, 2.5, 0.0])
-def test_edge_repulsion_matches_reference(model, rng, zeta):
+def test_edge_repulsion_matches_reference(model, rng, zeta, implicit):
     x, xp = perturbed(model, rng)
     k0 = model.material.stiffness
     forces = K.forces(model.arrays)
-    K._edge_repulsion_forces(model.arrays._replace(repulsion_nonlinearity=zeta, length_unit=1.0), xp, forces)
+    K._edge_repulsion_forces(model.arrays._replace(repulsion_nonlinearity=zeta, length_unit=1.0, implicit=implicit), xp,
+                             forces)
     ref_stiff, ref_force = naive.repulsion_terms(xp, xp, model.repulsion_vertex, model.repulsion_edge,
                                                  model.repulsion_rest_distance, k0, zeta)
     assert_close(forces.stiffness, ref_stiff)
