@@ -589,53 +589,71 @@ ANALYSIS = """### Where the targets stand: the missed ones and what would close 
 The per-step profile above (each kernel looped in compiled code, so no call overhead) names
 where a step's time goes. **The machine moves the figures more than the code does.** This
 run is on an AMD EPYC (Zen 4, 2 cores); the run of 2026-12-02 was on an Intel Xeon. On
-this machine on 2026-12-03, the commit before that day's change (8ff25c5) simulated happy
-on the Hopper face in 18-27 ms by the thesis's update (the Xeon: 9.25-11.7 ms), and
-llvmpipe drew the head's 512² frame in 34 ms (the Xeon: 17-19). The three targets met on
-the Xeon that this run misses (`prange` 1.71x there, 34.8 frames per second, 2.64 s for a
-fresh render) are missed for that reason; the code that met them is the same.
+this machine on 2026-12-03, one commit (8ff25c5) simulated happy on the Hopper face in
+18-27 ms by the thesis's update over separate runs (the Xeon: 9.25-11.7 ms), and llvmpipe
+drew the head's 512² frame in 34-37 ms (the Xeon: 17-19). The three targets met on the
+Xeon that this run misses (`prange` 1.71x there, 34.8 frames per second, 2.64 s for a
+fresh render) are missed for that reason; the code that met them is the same. Changes
+are therefore measured side by side in one process (the old and the new package imported
+together, alternating runs), not across runs of this script.
 
-- **Simulation, 2 ms for happy on the Hopper face.** Not met: the thesis's update takes
-  four steps a frame, 140 steps of about 130 µs here (60-80 µs on the Xeon); the
-  implicit solver one step a frame, but its step is the force terms, their links of K
-  (a scalar loop of their own) and about eight conjugate-gradient iterations, each a
-  product over the links as costly as the springs and the repulsion together (the
-  profile). 2 ms is 14 µs per step of the thesis's update, 30 ns per vertex-step. A step
-  of the 468-vertex face also starts about 17 parallel regions (one per parallel loop,
-  one per active muscle), 0.9 µs each on one thread here. What would close it: the
-  product over the links in the same two passes on vector lanes (each link's block
-  applied in rows, then scattered), and fewer, fused loops per step. Not fewer
-  iterations by the head's preconditioner: the Hopper face's system at rest factorised
-  (60,275 entries) made happy 26.6 ms against Jacobi's 22.0 (2026-12-02), each
-  iteration's two triangular solves costing more than the iterations they save.
-- **10 million vertex-steps per second per core at 28k vertices.** Not met: 2.7 million
-  here (373 ns per vertex-step at 27,614, the scaling table), 7.1-7.5 million on the Xeon
-  on 2026-12-02 (134-141 ns, after that day's changes). Profiled there at 27,614
-  vertices, one thread, per vertex-step: the muscles 47 ns (their frame 4.5; the flood
-  fills of section 3.3, 11, about 22 per region vertex, since the thesis's regions move
-  with the skin and are found again at every step; the pull with its back-projection of
-  eq. 3.22-3.25, 25, about 55 per region vertex, 0.49 region vertices per vertex), the
-  edge repulsion 42 (its vector loop 25, the scatter and sum 17), the springs 26 (9 and
-  17), the hypodermis 3. The springs and the pairs take two passes over
-  structure-of-arrays (facesim.kernels), so that their per-spring and per-triangle loops
-  could run on vector lanes (read so on the Xeon from the 256-bit registers in their
-  code, most likely wrongly: LLVM compiles both to scalar arithmetic, below); the
-  scatter to the vertices is scalar. Changes of 2026-12-02: the muscles' frame takes its
-  atan2 without branches
-  (facesim's own, kernels._atan2, NumPy's to 4e-15: 11 -> 4.5 ns a vertex), the
-  back-projection tests each wedge by signs before dividing (69 -> 59 ns a region
-  vertex), and a vertex's force and stiffness scatter side by side (36.0 -> 33.3 ns).
-  Tried and not kept, measured the same day: the back-projection's edge angles by that
-  atan2 (the pull 4 times slower: the call is then not inlined), the back-projection
-  without branches (93 ns against 69), the kernels compiled without `parallel` (195 ns
-  against 141: the parallel loops compile to better code, and their starts are not the
-  limit), Intel's SVML (llvmlite here is not built for it); earlier, each vertex gathering
-  its springs from its one-ring (20 ns against 13) and a reverse Cuthill-McKee order
-  (within 3%). What would close it, 134 -> 100 ns on the Xeon: the thesis's regions kept
-  while the skin under them moves less than a tolerance (the fills' 11 ns), the link
-  loops brought onto vector lanes (they are scalar now) and in float32, and one scatter and sum for the springs, the pairs and the
-  hinges together where each sums its own now (about 5 ns).
-- **`prange`, 2 threads against 1: not met here (1.58x at 27,614, 1.71x at 6,990); met
+- **Vector lanes for the thesis's update (2026-12-03).** The springs' and the pairs' loops
+  were scalar: they read the ends' positions through an index, and LLVM declined them
+  (its remarks, read with `-pass-remarks-analysis=loop-vectorize`: "too many memory
+  checks needed"; it checks every pair of arrays it cannot prove apart before
+  vectorising, and an array reached through a tuple is one it cannot prove apart). The
+  thesis's update now gathers the ends and corners into rows first and then runs a loop
+  that reads and writes rows alone, every array an argument of its own
+  (kernels._spring_tensions, kernels._repulsion_corners): LLVM vectorises it, 8 doubles
+  a lane ("vectorized loop (vectorization width: 8)"). Side by side in one process, one
+  thread: at 27,614 vertices the springs 56 -> 41 ns a vertex and the edge repulsion
+  168 -> 97 (the triangles' loop alone about 6 ns a triangle against 36 scalar); on the
+  Hopper face 60 -> 45 and 129 -> 51; whole runs of happy, the Hopper face 25.2 -> 21.7
+  ms and 27,614 vertices 454 -> 367 ns a vertex-step (1,944 -> 1,569 ms). The implicit
+  step's loops, which also write the links of K, stay scalar and read the positions where
+  they are: a gathering pass of their own made them slower (springs 68 -> 84 ns a
+  vertex), so they keep the old form (within this machine's noise of it).
+- **Simulation, 2 ms for happy on the Hopper face.** Not met: 15.8 ms by the thesis's
+  update here, four steps a frame, 140 steps of about 110 µs; the implicit solver takes
+  one step a frame, but its step is the force terms, their links of K (a scalar loop of
+  their own) and about eight conjugate-gradient iterations, each a product over the links
+  about as costly as the springs and the repulsion together (the profile). 2 ms is 14 µs
+  per step of the thesis's update, 30 ns per vertex-step: below what the springs' loop
+  alone costs written as the plainest serial loop (8.6 ns a spring, 2.8 springs a vertex,
+  measured here). A step of the 468-vertex face also starts about 20 parallel regions
+  (one per parallel loop, one per active muscle), 0.9 µs each on one thread here. What
+  would close it: a model with less work per vertex-step (the muscles' flood fills and
+  back-projection, 35 µs of the step, redone at every step because the thesis's regions
+  move with the skin), the product over the links gathered into rows as the springs'
+  loop now is, and fewer, fused loops per step. Not fewer iterations by the head's
+  preconditioner: the Hopper face's system at rest factorised (60,275 entries) made happy
+  26.6 ms against Jacobi's 22.0 (2026-12-02), each iteration's two triangular solves
+  costing more than the iterations they save.
+- **10 million vertex-steps per second per core at 28k vertices.** Not met: 2.9 million
+  here (348 ns per vertex-step at 27,614, the scaling table; 2.7 million, 373 ns, before
+  the vector lanes), 7.1-7.5 million on the Xeon on 2026-12-02 (134-141 ns). Profiled
+  here after the vector lanes (2026-12-03, 27,614 vertices, happy at frame 12, one
+  thread, per vertex-step): the muscles 141 ns (their frame 7; the flood fills of section
+  3.3 and the pull with its back-projection of eq. 3.22-3.25 the rest, about 0.5 region
+  vertices per vertex), the edge repulsion 82 (its triangles' loop about 15, the
+  gathering 8-15, the scatter and the sum the rest), the springs 31, the hypodermis 4.5,
+  the prediction 2. Profiled on the Xeon on 2026-12-02: the muscles 47 ns (frame 4.5,
+  fills 11, pull 25), the edge repulsion 42, the springs 26. Changes of 2026-12-02: the
+  muscles' frame takes its atan2 without branches (facesim's own, kernels._atan2,
+  NumPy's to 4e-15: 11 -> 4.5 ns a vertex), the back-projection tests each wedge by
+  signs before dividing (69 -> 59 ns a region vertex), and a vertex's force and
+  stiffness scatter side by side (36.0 -> 33.3 ns). Tried and not kept: the
+  back-projection's edge angles by that atan2 (the pull 4 times slower: the call is then
+  not inlined), the back-projection without branches (93 ns against 69), the kernels
+  compiled without `parallel` (195 ns against 141), Intel's SVML (llvmlite here is not
+  built for it); earlier, each vertex gathering its springs from its one-ring (20 ns
+  against 13) and a reverse Cuthill-McKee order (within 3%). What would close it: the
+  muscles are now the limit. The thesis's regions kept while the skin under them moves
+  less than a tolerance (the fills), the pull's back-projection gathered by rows as the
+  pairs' loop now is, the scatters to the vertices (scalar, about half of each link
+  term now) fused into one for the springs, the pairs and the hinges, and the link
+  loops in float32 (twice the lanes).
+- **`prange`, 2 threads against 1: not met here (1.49x at 27,614, 1.69x at 6,990); met
   on the Xeon (1.71x at 27,614 on 2026-12-02).** The springs, the edge repulsion, the
   bending, the muscles' flood fills (the muscles split by fixed slices,
   kernels._find_regions) and each muscle's region loop run on every core for a mesh of
@@ -643,36 +661,29 @@ fresh render) are missed for that reason; the code that met them is the same.
   buffers of their own so the bits do not depend on the thread count
   (tests/test_kernels.py). Profiled on the Xeon at 27,614 vertices: springs 1.77x,
   repulsion 1.99x, muscles 1.78x, the whole quasi-implicit step 1.92x. Profiled here
-  (2026-12-03, happy at frame 12, each term looped in compiled code, one thread and two):
-  springs 39 -> 28 ns a vertex (1.40x), edge repulsion 103 -> 65 (1.59x), muscles 74 ->
-  50 (1.49x), the whole step 307 -> 179 (1.71x); the whole run of five frames 1.59x, and
-  the bare steps of the same frames without the run's per-frame checks and copies cost
-  the same within this machine's noise, so what is serial around the steps is not the
-  limit here: each term scales less on this machine than on the Xeon. Its edge
-  repulsion is also 2.5 times the Xeon's per vertex where the springs are 1.5 times:
-  its per-triangle loop alone, one thread, takes 85 ns a vertex here (25 on the Xeon)
-  against 97 for the same loop with its flags left to run time (side by side in one
-  process). Read from the code LLVM makes here, the pairs' loop and the springs' loop
-  are both scalar (vsqrtsd and vdivsd, no packed square root or division) in the
-  compiled parallel loops themselves, with this CPU's tuning (znver4) and with Intel's
-  (skylake-avx512, icelake-server, sapphirerapids) alike; LLVM's remark: "cannot identify
-  array bounds" (the ends' positions are read through an index). The pairs' loop
-  stays scalar with its corners' positions and rest distances first copied into
-  contiguous rows (tried: 92 ns, the copy added). The 2026-12-02 reading of "vector
-  lanes" on the Xeon came from its 256-bit registers, which scalar code uses too, and
-  was most likely wrong (facesim.kernels says so now); why the pairs lose more here than
-  the springs is not explained. What might close it, untried: the pairs' arithmetic written four
-  triangles at a time in local arrays, so that LLVM's SLP vectoriser packs it; on both
-  machines, fewer bytes per step (the link loops in float32).
-  The 468-vertex faces run their loops on one thread, where a parallel region's start
-  outweighs its share of the step; during a render llvmpipe already runs on both cores.
+  before the vector lanes (2026-12-03, happy at frame 12, one thread and two): springs
+  39 -> 28 ns a vertex (1.40x), edge repulsion 103 -> 65 (1.59x), muscles 74 -> 50
+  (1.49x), the whole step 307 -> 179 (1.71x); the whole run of five frames 1.59x. With
+  the vector lanes the arithmetic a core does shrank, and the scatters and gathers,
+  bound by memory the two cores share, are a larger part of the step; the ratio was
+  1.58x in this script's run before them and 1.49x after, which this machine's noise
+  between runs may account for as well (not measured side by side). What would raise
+  it: the same fused scatter and fewer bytes per step (float32). The 468-vertex faces run their loops on one thread,
+  where a parallel region's start outweighs its share of the step; during a render
+  llvmpipe already runs on both cores.
 - **Compiling, measured apart.** Numba hands a parallel loop every tuple its body names,
   whole; the model's 67 fields cost each loop about 3 s of compiling (a one-line loop:
   3.9 s against 1.0 with its array taken out first). Since 2026-12-03 each term takes
   out what it reads before its loop (facesim.kernels): every kernel compiled in 143 s ->
-  79 s on this machine (the compiling row above: 66 s, against 66 s on the Xeon before
-  the change), the test suite from a fresh clone 954 -> 717 s.
-- **The head's frame against its floor, 1.2x: met at 512² (1.17x), not at 256².** The
+  79 s on this machine, the test suite from a fresh clone 954 -> 717 s. A kernel taking
+  the model still costs about 0.4 s more to compile than one taking a few arrays
+  (measured on a one-line kernel: 0.70 s against 0.28), about 13 s of the whole over the
+  32 kernels that take it. Numba files compiled kernels by their file's directory, so a
+  second copy of the same code (a wheel in a virtual environment, a CI clone) compiled
+  everything again; facesim's own cache locator files them by a hash of the code and the
+  package's name instead (facesim.config), and a copy elsewhere now loads them (a fresh
+  render from a copy: 87 s -> 2.7 s; tests/test_cache.py).
+- **The head's frame against its floor, 1.2x: met (1.15x at 512², 1.16x at 256²).** The
   floor draws the same scene with the same renderer and antialiasing and uploads vertex
   arrays computed before the clock starts, so what is over it is facesim's per-frame
   work, a fixed few milliseconds that weigh more against the smaller frame. Profiled on
@@ -683,27 +694,38 @@ fresh render) are missed for that reason; the code that met them is the same.
   written in place 0.3 ms (facesim.render._interleave), the uploads 0.2 ms. What would
   close it: the skin and normals of the next frame computed while llvmpipe draws this
   one (a nogil kernel in a second thread).
-- **25 frames per second end to end on the head at 512², antialiased: 24.0 here, 34.8 on
-  the Xeon (2026-12-02).** Here the floor alone, drawing and reading back, is 34 ms a
-  frame, so llvmpipe on this machine leaves no room for 25 per second whatever facesim
-  does; `--no-antialias` gives 24.5. What made it on the Xeon: antialiasing as a filter
+- **25 frames per second end to end on the head at 512², antialiased: 20.5 here (24.0 in
+  the run before), 34.8 on the Xeon (2026-12-02).** Here the floor alone, drawing and
+  reading back, is 34-37 ms a frame, so llvmpipe on this machine leaves no room for 25
+  per second whatever facesim does; `--no-antialias` gives 26.3. What made it on the Xeon: antialiasing as a filter
   on the frame as drawn (facesim.render._smooth_edges, the sub-pixel pass of FXAA),
   where drawing four times the pixels cost 30 ms more a frame (against the 4-samples
   frame the filtered one is 44.3 dB, the unfiltered 41.5 dB; tests/test_head.py;
   `--supersample` keeps the 4 samples), and the head's opaque parts culling their back
   faces (12-15% of a frame). Multisampling costs more in llvmpipe (108 ms at 512² with 2
   or 4 samples, measured on 2026-12-01).
-- **3 s for `facesim render` in a fresh process: 3.60 s here, 2.64 s on the Xeon.**
+- **3 s for `facesim render` in a fresh process: 3.77 s here (3.60 in the run before),
+  2.64 s on the Xeon.**
   Profiled there (3.0-3.5 s wall before the changes named): importing the command line
   0.3 s; the model 0.6 s (with the imports of trimesh and SciPy it needs); the
   simulation 0.2 s (Numba's cached kernels loaded); the head's figure 0.06 s; the GL
   context and scene 0.3 s; the 35 frames 1.2 s, encoding overlapped; facesim's command
   leaves by os._exit once its threads are joined and its streams flushed
   (facesim.cli.main), which saves the interpreter's 0.3 s teardown. Here the frames
-  alone, at llvmpipe's 34 ms, take 1.2 s of drawing and 0.2 s of encoding. What would
-  give it room: the model's arrays in the on-disk cache (0.6 s) and the GL context made
-  in a thread while the model builds (0.3 s).
-- **50 ms for happy on the head: met, 45.8 ms here** (38 ms on the Xeon). Side by side in
+  alone, at llvmpipe's 34 ms, take 1.2 s of drawing and 0.2 s of encoding. Profiled here
+  (2026-12-03): the model 1.7 s of a 4.5 s run, 1.4 s of it imports (trimesh, which
+  pyrender imports anyway, brings SciPy's spatial and optimize modules and networkx:
+  0.5 s), Numba's cached kernels loaded 0.6 s, the simulation 0.3 s, the writing 2.5 s.
+  Taking SciPy's assignment solver out of the head's mirror map saved nothing, since
+  trimesh imports the same modules (tried, reverted). What would give it room: the
+  model's arrays in the on-disk cache and the GL context made in a thread while the
+  model builds.
+- **50 ms for happy on the head: met in this script's process, 38.1 ms here (45.8 in the
+  run before)** (38 ms on the Xeon); the head's table above, which times the same run in
+  a process of its own, gives 51.6-54.2 ms here (50.5-59.5 in the run before), over the
+  target. The gap between the two processes is on every run of this machine and is not
+  explained (the same model, the same cached kernels; its process has imported pyrender
+  and OpenGL first). Side by side in
   one process (2026-12-01), the head's tied rim (issue 16) costs 7% over a pinned one.
   The profile above names the muscles and the preconditioner as the largest parts of a
   step.
@@ -779,7 +801,8 @@ def main() -> int:
             "happy's 35 frames.")
     text, compile_figures = compilation()
     section("Compilation, measured apart", text + "\n\nEach row is one fresh process; `cache=True` keeps compiled "
-            "kernels on disk, so only the very first run on a machine pays for compilation.")
+            "kernels on disk, so only the first run of this code on a machine pays for compilation, whichever copy "
+            "of facesim runs it (facesim.config).")
     wall, walls, peak_mb = fresh_render_wall(1 if quick else 3, 64 if quick else 512)
     section("`facesim render expressions/happy.yaml` in a fresh process, caches warm (the default head, 512² MP4)",
             f"median wall {wall:.2f} s over {len(walls)} runs: " + ", ".join(f"{w:.2f}" for w in walls) +
