@@ -723,9 +723,10 @@ together, alternating runs), not across runs of this script.
 - **50 ms for happy on the head: met in this script's process, 38.1 ms here (45.8 in the
   run before)** (38 ms on the Xeon); the head's table above, which times the same run in
   a process of its own, gives 51.6-54.2 ms here (50.5-59.5 in the run before), over the
-  target. The gap between the two processes is on every run of this machine and is not
-  explained (the same model, the same cached kernels; its process has imported pyrender
-  and OpenGL first). Side by side in
+  target. That is this machine's noise between processes, not pyrender: the median of
+  nine runs in six fresh processes was 42-58 ms, alike whether pyrender was imported
+  and a GL context made first or not (2026-12-03). On this machine the target is met in
+  some processes and missed in others. Side by side in
   one process (2026-12-01), the head's tied rim (issue 16) costs 7% over a pinned one.
   The profile above names the muscles and the preconditioner as the largest parts of a
   step.
