@@ -38,7 +38,10 @@ def test_bench_quick_prints_every_table_with_sensible_figures(tmp_path):
     # Figures, not speed: how fast is BENCHMARKS.md's business (ratios side by side in one
     # run, on an idle machine); here the suite's other worker shares the two cores.
     assert f["numba_ratio"] > 0
-    assert f["compile"]["cached"]["first"] < f["compile"]["cold"]["first"]  # the on-disk cache is used
+    # the on-disk cache is used: a fresh process loads the solver, compiles nothing (the
+    # compiling itself, a minute, is measured by `make bench` alone)
+    assert f["compile"]["cold"] is None and "not measured (--quick)" in result.stdout
+    assert f["compile"]["cached"]["loaded"] >= 1 and f["compile"]["cached"]["compiled"] == 0
     assert f["solvers"]["the Hopper face"]["implicit"] > 0 and f["solvers"]["the Hopper face"]["quasi"] > 0
     assert f["solvers"]["the default head"]["implicit"] > 0 and f["solvers"]["the default head"]["no_bending"] > 0
     assert max(f["solvers"]["apex, the default head"].values()) < 0.02
