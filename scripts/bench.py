@@ -661,8 +661,11 @@ together, alternating runs), not across runs of this script.
   muscles are now the limit. The thesis's regions kept while the skin under them moves
   less than a tolerance (the fills), the pull's back-projection gathered by rows as the
   pairs' loop now is, the scatters to the vertices (scalar, about half of each link
-  term now) fused into one for the springs, the pairs and the hinges, and the link
-  loops in float32 (twice the lanes).
+  term now) fused into one for the springs, the pairs and the hinges. Not float32: the
+  springs' vector loop in float32 took 2.98 ns a vertex against 3.17 in float64 at
+  27,614 vertices (one process, one thread, 2026-12-03; g within 1e-6 of float64's), the
+  loop being bound by its memory, not its lanes, and the scalar scatters and fills
+  around it would not change.
 - **`prange`, 2 threads against 1: not met here (1.49x at 27,614, 1.69x at 6,990); met
   on the Xeon (1.71x at 27,614 on 2026-12-02).** The springs, the edge repulsion, the
   bending, the muscles' flood fills (the muscles split by fixed slices,
@@ -678,7 +681,7 @@ together, alternating runs), not across runs of this script.
   bound by memory the two cores share, are a larger part of the step; the ratio was
   1.58x in this script's run before them and 1.49x after, which this machine's noise
   between runs may account for as well (not measured side by side). What would raise
-  it: the same fused scatter and fewer bytes per step (float32). The 468-vertex faces run their loops on one thread,
+  it: the same fused scatter, which reads and writes each vertex's buffers once. The 468-vertex faces run their loops on one thread,
   where a parallel region's start outweighs its share of the step; during a render
   llvmpipe already runs on both cores.
 - **Compiling, measured apart.** Numba hands a parallel loop every tuple its body names,
