@@ -327,8 +327,8 @@ def _spring(springs, rest_length, s, dx, dy, dz, squarable):
 def _spring_forces(model, xp, forces):
     """Springs on the mesh edges, eq. 3.6, at the predicted positions: F_i = g (X_i* - X_j*),
     its g into both ends' stiffness (eq. 3.17), and, for the implicit step, spring s as
-    link s of K. Every spring's X_i* - X_j* into the rows of ``spring_delta`` and its g
-    into ``tension``, then each spring's force added to its ends (``_scatter_springs``).
+    link s of K. Every spring's g into ``tension``, then each spring's force added to its
+    ends (``_scatter_springs``).
 
     The thesis's update gathers the ends first and then takes every g in a loop over
     rows alone (``_spring_tensions``), which LLVM puts on vector lanes; the implicit step
@@ -367,9 +367,9 @@ def _spring_tensions(springs, rest_length, delta, squarable, tension):
 
 @njit(**PARALLEL_OPTIONS)
 def _spring_links(springs, rest_length, end, xp, squarable, forces):
-    """Every spring's X_i* - X_j* into ``spring_delta``, its g into ``tension`` and spring s
-    as link s of K (``Forces``), for the implicit step: a loop of its own, so that the
-    thesis's update, which needs only the g, does not write the links."""
+    """Every spring's g into ``tension`` and spring s as link s of K (``Forces``), for the
+    implicit step: a loop of its own, so that the thesis's update, which needs only the
+    g, does not write the links."""
     tension, links = forces.tension, _links(forces)
     for s in prange(tension.shape[0]):
         i = end[0, s]
