@@ -643,11 +643,13 @@ together, alternating runs), not across runs of this script.
   here (348 ns per vertex-step at 27,614, the scaling table; 2.7 million, 373 ns, before
   the vector lanes), 7.1-7.5 million on the Xeon on 2026-12-02 (134-141 ns). Profiled
   here after the vector lanes (2026-12-03, 27,614 vertices, happy at frame 12, one
-  thread, per vertex-step): the muscles 141 ns (their frame 7; the flood fills of section
-  3.3 and the pull with its back-projection of eq. 3.22-3.25 the rest, about 0.5 region
-  vertices per vertex), the edge repulsion 82 (its triangles' loop about 15, the
-  gathering 8-15, the scatter and the sum the rest), the springs 31, the hypodermis 4.5,
-  the prediction 2. Profiled on the Xeon on 2026-12-02: the muscles 47 ns (frame 4.5,
+  thread, per vertex-step, the range of three runs in three processes): the muscles
+  75-164 ns (their frame 7; the flood fills of section 3.3 and the pull with its
+  back-projection of eq. 3.22-3.25 the rest, about 0.5 region vertices per vertex; the
+  most variable term here), the edge repulsion 50-82 (its triangles' loop 16, the
+  scatter to the vertices and the sum 24, the gathering the rest), the springs 28-31
+  (their loop 3.6, the scatter and the sum 24), the hypodermis 3-4.5, the prediction
+  2. Profiled on the Xeon on 2026-12-02: the muscles 47 ns (frame 4.5,
   fills 11, pull 25), the edge repulsion 42, the springs 26. Changes of 2026-12-02: the
   muscles' frame takes its atan2 without branches (facesim's own, kernels._atan2,
   NumPy's to 4e-15: 11 -> 4.5 ns a vertex), the back-projection tests each wedge by
