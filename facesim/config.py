@@ -68,14 +68,11 @@ def _key_numba_cache() -> None:
 
         @classmethod
         def from_function(cls, py_func, py_file):
-            if Path(py_file).resolve().parent != PACKAGE_DIR or not os.path.exists(py_file):
+            if Path(py_file).resolve().parent != PACKAGE_DIR:
                 return None
-            self = cls(py_func, py_file)
-            try:
-                self.ensure_cache_path()
-            except OSError:  # a read-only home: Numba's own locators, or no cache
-                return None
-            return self
+            # Numba's own steps past its CACHE_DIR test: the file exists, the folder is
+            # writable (else the next locator, or no cache)
+            return super(provided, cls).from_function(py_func, py_file)
 
     implementation = getattr(caching, "CacheImpl", None) or caching._CacheImpl
     implementation._locator_classes = [CodeKeyedLocator] + [
