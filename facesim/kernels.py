@@ -77,11 +77,13 @@ from .config import CHUNKS, LENGTH_EPS, NEGLIGIBLE_DELTA, NUMBA_OPTIONS, PARALLE
 
 #: The model's arrays and constants, as the kernels read them (facesim.model.Model.arrays).
 #: Shapes: n vertices, t triangles, s springs, r repulsion pairs, M muscles; the jaw and
-#: eyelid fields are facesim.rig.Rig's, the material's are facesim.model.Material's.
+#: eyelid fields are facesim.rig.Rig's, the material's are facesim.model.Material's. The
+#: pairs' rest distances are Model.repulsion_rest_distance by corner (3, t), pair 3t + k
+#: at (k, t), for the vector loop of ``_repulsion_corners``.
 ModelArrays = namedtuple("ModelArrays", [
     "rest_position", "faces", "rest_normal", "rest_area", "rest_against", "pinned", "tie",
     "neighbour_start", "neighbour_index", "ring_start", "ring_a", "ring_b",
-    "spring_indices", "spring_end", "corner", "spring_rest_length", "repulsion_vertex", "repulsion_edge", "repulsion_rest_distance",
+    "spring_indices", "spring_end", "corner", "spring_rest_length", "repulsion_vertex", "repulsion_edge",
     "corner_rest_distance",
     "hinge", "hinge_weight",
     "muscle_kind", "muscle_axes", "muscle_insertion", "muscle_centre_start", "muscle_centre_index",

@@ -133,7 +133,6 @@ class Model:
     repulsion_vertex: np.ndarray  # (r,)
     repulsion_edge: np.ndarray  # (r, 2)
     repulsion_rest_distance: np.ndarray  # (r,)
-    corner_rest_distance: np.ndarray  # (3, t) the same by corner: pair 3t + k at (k, t), as corner
     hinge: np.ndarray  # (e, 4) interior edges' hinges: the edge's ends, then the two opposite vertices
     hinge_weight: np.ndarray  # (e, 4) their bending stencils (kernels._bending_forces)
     muscle_kind: np.ndarray  # (M,) LINEAR or SPHINCTER
@@ -263,7 +262,6 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         repulsion_vertex=repulsion_vertex,
         repulsion_edge=repulsion_edge,
         repulsion_rest_distance=altitude,
-        corner_rest_distance=altitude.reshape(-1, 3).T,
         hinge=hinge,
         hinge_weight=hinge_weight,
         muscle_kind=muscles.kind,
@@ -284,7 +282,9 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
     length_unit = float(np.sqrt(resolution))
     constants = dict(axis_x=float(axis_x), axis_z=float(axis_z), radius=float(radius))
     kernel_arrays = ModelArrays(
-        **arrays, **constants,
+        # the kernels read the pairs' rest distances by corner, pair 3t + k at (k, t), as ``corner``
+        **{key: value for key, value in arrays.items() if key != "repulsion_rest_distance"},
+        corner_rest_distance=_frozen(altitude.reshape(-1, 3).T), **constants,
         **{key: _frozen(np.asarray(value)) for key, value in vars(rig).items() if key not in ("jaw_column", "jaw_max")},
         jaw_column=int(rig.jaw_column), jaw_max=float(rig.jaw_max),
         **{key: float(getattr(resolved, key)) for key in ("mass", "damping", "stiffness", "nonlinearity",
