@@ -538,14 +538,20 @@ def _repulsion_corners(pairs, rest_distance, position, squarable, out, stiffness
     alone, one per kind of exponent (``_spring_tensions``)."""
     if squarable:
         for t in prange(position.shape[1]):
-            _repulsion_triangle(pairs, rest_distance, t, position[0, t], position[1, t], position[2, t], position[3, t],
-                                position[4, t], position[5, t], position[6, t], position[7, t], position[8, t], True, out,
-                                stiffness, pairs, 0, 0, 0, 0, False)
+            _repulsion_row(pairs, rest_distance, position, t, True, out, stiffness)
     else:
         for t in prange(position.shape[1]):
-            _repulsion_triangle(pairs, rest_distance, t, position[0, t], position[1, t], position[2, t], position[3, t],
-                                position[4, t], position[5, t], position[6, t], position[7, t], position[8, t], False, out,
-                                stiffness, pairs, 0, 0, 0, 0, False)
+            _repulsion_row(pairs, rest_distance, position, t, False, out, stiffness)
+
+
+@njit(**dict(NUMBA_OPTIONS, inline="always"))
+def _repulsion_row(pairs, rest_distance, position, t, squarable, out, stiffness):
+    """``_repulsion_triangle`` for triangle t, its corners read from the rows of
+    ``position`` (9, t), without links (the thesis's update: no link is written, so the
+    links' arguments are placeholders)."""
+    _repulsion_triangle(pairs, rest_distance, t, position[0, t], position[1, t], position[2, t], position[3, t],
+                        position[4, t], position[5, t], position[6, t], position[7, t], position[8, t], squarable, out,
+                        stiffness, pairs, 0, 0, 0, 0, False)
 
 
 @njit(**PARALLEL_OPTIONS)
