@@ -194,9 +194,34 @@ def _lit_shader(renderer, directional_lights: int) -> None:
             if fragment_shader == "mesh.frag":
                 fragment_shader = str(LIT_SHADER)  # an absolute path: os.path.join keeps it
                 defines = dict(defines or {}, DIRECTIONAL_LIGHTS=directional_lights)
-            return super().get_program(vertex_shader, fragment_shader, geometry_shader, defines)
+            program = super().get_program(vertex_shader, fragment_shader, geometry_shader, defines)
+            if not hasattr(program, "_facesim_uniforms"):
+                _remember_uniforms(program)
+            return program
 
     renderer._program_cache = Programs()
+
+
+def _remember_uniforms(program) -> None:
+    """Make a pyrender ShaderProgram skip setting a uniform to the value it already holds.
+    A program keeps its uniforms between draws, and pyrender sets every one of them
+    before each part it draws (the camera, the lights, the material: 162 calls a frame
+    for a head's nine parts, each a location looked up by name and a call through
+    PyOpenGL, about 25 µs). Values are compared as their bytes, so what is set is exactly
+    what pyrender would set."""
+    set_uniform = program.set_uniform
+    held = program._facesim_uniforms = {}
+
+    def set_changed(name, value, unsigned=False):
+        if isinstance(value, np.ndarray):
+            key = (value.dtype.str, value.shape, value.tobytes(), unsigned)
+        else:
+            key = (type(value), value, unsigned)
+        if held.get(name) != key:
+            set_uniform(name, value, unsigned)
+            held[name] = key
+
+    program.set_uniform = set_changed
 
 
 def _colour_only(renderer) -> None:

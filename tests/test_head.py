@@ -129,6 +129,31 @@ def test_the_lit_shader_draws_what_pyrenders_draws():
     assert np.abs(ours.astype(int) - theirs.astype(int)).max() <= 1
 
 
+def test_a_renderer_that_skips_unchanged_uniforms_draws_each_change_of_view(monkeypatch):
+    """facesim's programs set a uniform only when its value changes (render._remember_uniforms):
+    turned, lit and posed frame after frame, a renderer draws what one that sets every
+    uniform before every part (pyrender's way) draws, and every change shows."""
+    import facesim.render
+
+    animation = simulate(spec("happy"))
+    last = animation.frames - 1
+    views = [dict(yaw=0.0, pitch=0.0, light=1.0), dict(yaw=12.0, pitch=-5.0, light=0.6), dict(yaw=0.0, pitch=0.0, light=1.0)]
+    gaze = [np.zeros(5), np.array([0.0, 0.0, 0.0, 8.0, 0.0]), np.zeros(5)]
+    drawn = {}
+    for way in ("remembered", "every uniform"):
+        if way == "every uniform":
+            monkeypatch.setattr(facesim.render, "_remember_uniforms", lambda program: setattr(program, "_facesim_uniforms", None))
+        with FaceRenderer.of(animation, RenderSettings(96, 96)) as renderer:
+            drawn[way] = []
+            for view, pose in zip(views, gaze):
+                renderer.view(**view)
+                drawn[way].append(renderer.frame(animation, last, pose=pose))
+    for ours, theirs in zip(*drawn.values()):
+        np.testing.assert_array_equal(ours, theirs)
+    first, turned, back = drawn["remembered"]
+    assert (first != turned).any() and (first == back).all()
+
+
 def test_antialiasing_by_the_edge_filter_comes_toward_four_samples_per_pixel():
     """The default antialiasing filters the frame as drawn along its edges
     (render._smooth_edges): happy's apex on the head comes nearer the same frame drawn
