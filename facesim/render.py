@@ -224,21 +224,25 @@ def _remember_uniforms(program) -> None:
     program.set_uniform = set_changed
 
 
-def _colour_only(renderer) -> None:
+def _colour_only(renderer, multisampled: bool) -> None:
     """Make a pyrender Renderer read back only a frame's colour. pyrender also reads every
     pixel's depth and turns it into a distance (a blit, a read and several passes over the
     frame's floats), which facesim needs only to lay a frame over a photo (``--onto``);
     the depth it then returns is None. EGL reads pyrender's framebuffer
-    (``_read_main_framebuffer``), OSMesa the context's own buffer (``read_depth_buf``)."""
+    (``_read_main_framebuffer``), OSMesa the context's own buffer (``read_depth_buf``).
+    A framebuffer drawn with one sample a pixel (``_single_sample``) is read where it was
+    drawn; only a multisampled one is first resolved by a blit (the head at 512², side by
+    side in one process: 29.1 -> 27.4 and 25.8 -> 24.4 ms a frame, the same pixels)."""
     import pyrender
     from OpenGL import GL
 
     def read_main_framebuffer(scene, flags):
         width, height = renderer._main_fb_dims
         GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._main_fb_ms)
-        GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, renderer._main_fb)
-        GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height, GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR)
-        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._main_fb)
+        if multisampled:
+            GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, renderer._main_fb)
+            GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height, GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR)
+            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._main_fb)
         channels, layout = (4, GL.GL_RGBA) if flags & pyrender.RenderFlags.RGBA else (3, GL.GL_RGB)
         data = GL.glReadPixels(0, 0, width, height, layout, GL.GL_UNSIGNED_BYTE)
         return np.frombuffer(data, dtype=np.uint8).reshape(height, width, channels)[::-1], None
@@ -570,11 +574,12 @@ class FaceRenderer:
                     "install Debian's libosmesa6 or try --backend egl"
                 ) from None
             _share_egl_display(self._renderer)
-            if supersample or self._smooth or not settings.antialias:
+            multisampled = not (supersample or self._smooth or not settings.antialias)
+            if not multisampled:
                 _single_sample(self._renderer._renderer)
             _lit_shader(self._renderer._renderer, len(self._lights))
             if settings.onto is None:
-                _colour_only(self._renderer._renderer)
+                _colour_only(self._renderer._renderer, multisampled)
             wireframe = settings.wireframe and figure is None
             self._flags = pyrender.RenderFlags.ALL_WIREFRAME if wireframe else pyrender.RenderFlags.NONE
             if settings.look == "photo":
