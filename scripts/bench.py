@@ -601,11 +601,31 @@ where a step's time goes. **The machine moves the figures more than the code doe
 run is on an AMD EPYC (Zen 4, 2 cores); the run of 2026-12-02 was on an Intel Xeon. On
 this machine on 2026-12-03, one commit (8ff25c5) simulated happy on the Hopper face in
 18-27 ms by the thesis's update over separate runs (the Xeon: 9.25-11.7 ms), and llvmpipe
-drew the head's 512² frame in 34-37 ms (the Xeon: 17-19). The three targets met on the
-Xeon that this run misses (`prange` 1.71x there, 34.8 frames per second, 2.64 s for a
-fresh render) are missed for that reason; the code that met them is the same. Changes
-are therefore measured side by side in one process (the old and the new package imported
-together, alternating runs), not across runs of this script.
+drew the head's 512² frame in 34-37 ms (the Xeon: 17-19). Three targets met on the Xeon
+were missed in this morning's run here (`prange` 1.49x, 20.5 frames per second, 3.77 s
+for a fresh render); in this afternoon's run `prange` (1.74x, the same simulation code)
+and the frames per second (29.2, after the render changes below) are met, and the fresh
+render misses by 0.06 s. Changes are therefore measured side by side in one process (the
+old and the new code imported together, alternating runs), not across runs of this
+script.
+
+- **Rendering (2026-12-03, afternoon).** Three changes to how facesim drives pyrender,
+  each drawing the same pixels (max difference 0), each measured side by side in one
+  process on the head at 512² (facesim.render): the lit shader loops over the scene's
+  two lights as a constant compiled in (`DIRECTIONAL_LIGHTS`), not pyrender's uniform
+  count, which Mesa runs under a mask of the pixels still in the loop (31.6 -> 28.8 and
+  34.4 -> 27.4 ms a frame); the programs set a uniform only when its value changes,
+  where pyrender sets all of them before each of the head's nine parts, 162 calls a
+  frame through PyOpenGL (25.7 -> 24.4 ms; at 128² 16.3 -> 14.7); and a frame drawn with
+  one sample a pixel is read where it was drawn, without the blit into pyrender's second
+  framebuffer (29.1 -> 27.4 and 25.8 -> 24.4 ms). Where the frame's time goes now
+  (512², one process): drawing and reading back about 23 ms, of which the skin's
+  shading is about 9 (the same frame with a flat shader: 13.6 against 25.1 ms) and a
+  fixed 10-12 ms at any size (128²: 12-17 ms a frame), the draw calls' vertex work and
+  pyrender's Python; the edge filter 1.6-2.2 ms, the skin carried from the simulated
+  mesh 1.1, the normals and vertex arrays 0.9. Tried and not kept: `gc.freeze()` after
+  the renderer is built (within noise; a full collection here takes 100 ms, but they
+  are rare), x264 with fewer threads beside llvmpipe (within noise).
 
 - **Vector lanes for the thesis's update (2026-12-03).** The springs' and the pairs' loops
   were scalar: they read the ends' positions through an index, and LLVM declined them
@@ -623,25 +643,30 @@ together, alternating runs), not across runs of this script.
   step's loops, which also write the links of K, stay scalar and read the positions where
   they are: a gathering pass of their own made them slower (springs 68 -> 84 ns a
   vertex), so they keep the old form (within this machine's noise of it).
-- **Simulation, 2 ms for happy on the Hopper face.** Not met: 15.8 ms by the thesis's
-  update here, four steps a frame, 140 steps of about 110 µs; the implicit solver takes
+- **Simulation, 2 ms for happy on the Hopper face.** Not met: 18.0 ms by the thesis's
+  update in this run (15.8 in this morning's), four steps a frame, 140 steps of about 110 µs; the implicit solver takes
   one step a frame, but its step is the force terms, their links of K (a scalar loop of
   their own) and about eight conjugate-gradient iterations, each a product over the links
   about as costly as the springs and the repulsion together (the profile). 2 ms is 14 µs
   per step of the thesis's update, 30 ns per vertex-step: below what the springs' loop
   alone costs written as the plainest serial loop (8.6 ns a spring, 2.8 springs a vertex,
-  measured here). A step of the 468-vertex face also starts about 20 parallel regions
-  (one per parallel loop, one per active muscle), 0.9 µs each on one thread here. What
-  would close it: a model with less work per vertex-step (the muscles' flood fills and
-  back-projection, 35 µs of the step, redone at every step because the thesis's regions
-  move with the skin), the product over the links gathered into rows as the springs'
-  loop now is, and fewer, fused loops per step. Not fewer iterations by the head's
+  measured here). A step of the 468-vertex face also starts about 33 parallel regions
+  (one per parallel loop, one per active muscle), 1.2 µs each on one thread here (a
+  one-line loop over 468 entries, against 0.06 µs compiled serially). They are not what
+  the step pays for: the muscles' region loops fused into one parallel loop for all the
+  muscles (a step then starts some 19 fewer) measured the same side by side in one
+  process, happy on the Hopper face 16.45 against 16.39 ms on one thread, on the head
+  43.5 against 44.6 ms (2026-12-03; not kept). What would close it: a model with less
+  work per vertex-step (the muscles' flood fills and back-projection, 35 µs of the step,
+  redone at every step because the thesis's regions move with the skin) and the product
+  over the links gathered into rows as the springs' loop now is. Not fewer iterations by the head's
   preconditioner: the Hopper face's system at rest factorised (60,275 entries) made happy
   26.6 ms against Jacobi's 22.0 (2026-12-02), each iteration's two triangular solves
   costing more than the iterations they save.
-- **10 million vertex-steps per second per core at 28k vertices.** Not met: 2.9 million
-  here (348 ns per vertex-step at 27,614, the scaling table; 2.7 million, 373 ns, before
-  the vector lanes), 7.1-7.5 million on the Xeon on 2026-12-02 (134-141 ns). Profiled
+- **10 million vertex-steps per second per core at 28k vertices.** Not met: 3.9 million
+  in this run (255 ns per vertex-step at 27,614, the scaling table), 2.9 million (348 ns)
+  in this morning's with the same simulation code (2.7 million, 373 ns, before the vector
+  lanes), 7.1-7.5 million on the Xeon on 2026-12-02 (134-141 ns). Profiled
   here after the vector lanes (2026-12-03, 27,614 vertices, happy at frame 12, one
   thread, per vertex-step, the range of three runs in three processes): the muscles
   75-164 ns (their frame 7; the flood fills of section 3.3 and the pull with its
@@ -668,8 +693,9 @@ together, alternating runs), not across runs of this script.
   27,614 vertices (one process, one thread, 2026-12-03; g within 1e-6 of float64's), the
   loop being bound by its memory, not its lanes, and the scalar scatters and fills
   around it would not change.
-- **`prange`, 2 threads against 1: not met here (1.49x at 27,614, 1.69x at 6,990); met
-  on the Xeon (1.71x at 27,614 on 2026-12-02).** The springs, the edge repulsion, the
+- **`prange`, 2 threads against 1: met in this run (1.74x at 27,614, 1.69x at 6,990),
+  missed in this morning's with the same simulation code (1.49x); met on the Xeon (1.71x
+  at 27,614 on 2026-12-02).** The springs, the edge repulsion, the
   bending, the muscles' flood fills (the muscles split by fixed slices,
   kernels._find_regions) and each muscle's region loop run on every core for a mesh of
   at least 4,000 vertices (facesim.config.PARALLEL_FROM), scattering by fixed slices into
@@ -682,7 +708,7 @@ together, alternating runs), not across runs of this script.
   the vector lanes the arithmetic a core does shrank, and the scatters and gathers,
   bound by memory the two cores share, are a larger part of the step; the ratio was
   1.58x in this script's run before them and 1.49x after, which this machine's noise
-  between runs may account for as well (not measured side by side). What would raise
+  between runs accounts for: this run's 1.74x is the same simulation code. What would raise
   it: the same fused scatter, which reads and writes each vertex's buffers once. The 468-vertex faces run their loops on one thread,
   where a parallel region's start outweighs its share of the step; during a render
   llvmpipe already runs on both cores.
@@ -698,8 +724,11 @@ together, alternating runs), not across runs of this script.
   everything again; facesim's own cache locator files them by a hash of the code and the
   package's name instead (facesim.config), and a copy elsewhere now loads them (a fresh
   render from a copy: 87 s -> 2.7 s; tests/test_cache.py).
-- **The head's frame against its floor, 1.2x: met (1.15x at 512², 1.16x at 256²).** The
-  floor draws the same scene with the same renderer and antialiasing and uploads vertex
+- **The head's frame against its floor, 1.2x: met in this run (1.13x at 512², 1.17x at
+  256²), at the edge of it: a run of this afternoon's with only the first two render
+  changes gave 1.36x and 1.28x, and two runs of the head's table alone 1.14x and 1.28x at
+  512².** The render changes above apply to the floor as well, so it is faster (23.0 ms
+  here at 512²) and facesim's same few milliseconds weigh more against it. The floor draws the same scene with the same renderer and antialiasing and uploads vertex
   arrays computed before the clock starts, so what is over it is facesim's per-frame
   work, a fixed few milliseconds that weigh more against the smaller frame. Profiled on
   the Xeon at 512² (22-24 ms a frame): drawing and reading back 17-19 ms, the edge filter
@@ -709,18 +738,34 @@ together, alternating runs), not across runs of this script.
   written in place 0.3 ms (facesim.render._interleave), the uploads 0.2 ms. What would
   close it: the skin and normals of the next frame computed while llvmpipe draws this
   one (a nogil kernel in a second thread).
-- **25 frames per second end to end on the head at 512², antialiased: 20.5 here (24.0 in
-  the run before), 34.8 on the Xeon (2026-12-02).** Here the floor alone, drawing and
-  reading back, is 34-37 ms a frame, so llvmpipe on this machine leaves no room for 25
-  per second whatever facesim does; `--no-antialias` gives 26.3. What made it on the Xeon: antialiasing as a filter
+- **25 frames per second end to end on the head at 512², antialiased: met, 29.2 in this
+  run (20.5 in this morning's, 24.0 in the one before), 34.8 on the Xeon (2026-12-02).**
+  What made it here: the three render changes above (facesim's frame 25.9 ms in this run;
+  the floor alone was 34-37 ms in this morning's). Measured end to end in one process
+  (2026-12-03): 35 frames in 1.05-1.31 s, of which the simulation 0.04 s, drawing 0.84-1.07 s
+  with the encoder running beside it on the same two cores (x264 alone takes 0.2 s for
+  the 35), the sends to it 0.1 s, its close 0.03 s and reading the file back 0.03-0.04
+  s. What made it on the Xeon: antialiasing as a filter
   on the frame as drawn (facesim.render._smooth_edges, the sub-pixel pass of FXAA),
   where drawing four times the pixels cost 30 ms more a frame (against the 4-samples
   frame the filtered one is 44.3 dB, the unfiltered 41.5 dB; tests/test_head.py;
   `--supersample` keeps the 4 samples), and the head's opaque parts culling their back
   faces (12-15% of a frame). Multisampling costs more in llvmpipe (108 ms at 512² with 2
   or 4 samples, measured on 2026-12-01).
-- **3 s for `facesim render` in a fresh process: 3.77 s here (3.60 in the run before),
-  2.64 s on the Xeon.**
+- **3 s for `facesim render` in a fresh process: 3.06 s in this run (2.98-3.32 over its
+  three), 3.77 s in this morning's, 2.64 s on the Xeon.** Profiled here this afternoon
+  (`python -X importtime`, one process): of about 3.3 s, the imports are 1.2-1.7 s:
+  facesim with Numba 0.55 s, SciPy's optimize module 0.34 s (which trimesh imports
+  anyway; SciPy 1.17 parses docstrings at import for its array-API notes, and 1.15 imports
+  the same modules 0.05 s faster: not worth pinning), trimesh 0.30 s, pyrender 0.16 s,
+  and Numba's cffi support 0.13 s where cffi is installed (MediaPipe's `photo` extra
+  brings it; a plain install has none). Then the model 0.24 s (Numba's typing set up and
+  its cached kernels loaded), the simulation 0.18 s, the figure 0.07 s, the GL context,
+  scene and shaders 0.3 s, and the 35 frames at about 25 ms. Tried: pyrender imported in
+  a second thread while the model builds: no gain (3.64-3.94 s against 3.69-4.56 s over
+  four pairs of runs; imports hold the interpreter's lock). What would close it: the
+  drawing in a process of its own, started with the command, that imports pyrender,
+  builds the figure and opens its context while the main process simulates.
   Profiled there (3.0-3.5 s wall before the changes named): importing the command line
   0.3 s; the model 0.6 s (with the imports of trimesh and SciPy it needs); the
   simulation 0.2 s (Numba's cached kernels loaded); the head's figure 0.06 s; the GL
@@ -732,13 +777,11 @@ together, alternating runs), not across runs of this script.
   pyrender imports anyway, brings SciPy's spatial and optimize modules and networkx:
   0.5 s), Numba's cached kernels loaded 0.6 s, the simulation 0.3 s, the writing 2.5 s.
   Taking SciPy's assignment solver out of the head's mirror map saved nothing, since
-  trimesh imports the same modules (tried, reverted). What would give it room: the
-  model's arrays in the on-disk cache and the GL context made in a thread while the
-  model builds.
-- **50 ms for happy on the head: met in this script's process, 38.1 ms here (45.8 in the
-  run before)** (38 ms on the Xeon); the head's table above, which times the same run in
-  a process of its own, gives 51.6-54.2 ms here (50.5-59.5 in the run before), over the
-  target. That is this machine's noise between processes, not pyrender: the median of
+  trimesh imports the same modules (tried, reverted).
+- **50 ms for happy on the head: met in this script's process, 45.1 ms in this run (38.1
+  in this morning's)** (38 ms on the Xeon); the head's table above, which times the same
+  run in a process of its own, gives 45.6 and 55.0 ms in this run (51.6-54.2 in this
+  morning's), at and over the target. That is this machine's noise between processes, not pyrender: the median of
   nine runs in six fresh processes was 42-58 ms, alike whether pyrender was imported
   and a GL context made first or not (2026-12-03). On this machine the target is met in
   some processes and missed in others. Side by side in
