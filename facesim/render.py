@@ -304,10 +304,14 @@ def _downsample(image, factor, out):
 
 @njit(**NUMBA_OPTIONS)
 def _luma(image, y, x):
-    """Rec. 601 luma of pixel (y, x) of an RGB(A) uint8 image, its coordinates clamped."""
-    y = min(max(y, 0), image.shape[0] - 1)
-    x = min(max(x, 0), image.shape[1] - 1)
+    """Rec. 601 luma of pixel (y, x) of an RGB(A) uint8 image."""
     return 0.299 * image[y, x, 0] + 0.587 * image[y, x, 1] + 0.114 * image[y, x, 2]
+
+
+@njit(**NUMBA_OPTIONS)
+def _near(plane, y, x):
+    """plane[y, x], its coordinates clamped to the plane."""
+    return plane[min(max(y, 0), plane.shape[0] - 1), min(max(x, 0), plane.shape[1] - 1)]
 
 
 @njit(**dict(PARALLEL_OPTIONS, fastmath=False))
@@ -324,21 +328,27 @@ def _smooth_edges(image, out):
     draws. Compiled without ``fastmath``: with it, a dataset sample's bytes differed
     between a process that compiled the kernel and one that loaded it from Numba's cache
     (measured on a cold cache; the lumas tie often, at whole levels, and a reordered sum
-    breaks a tie either way); without it they agree."""
+    breaks a tie either way); without it they agree. Each pixel's luma is taken once, into
+    a plane of its own, where the filter reads nine (the head at 512², side by side in one
+    process: 1.51 -> 0.95 ms a frame, the same bytes over 56 frames of four expressions)."""
     height, width = image.shape[0], image.shape[1]
+    luma = np.empty((height, width))
+    for row in prange(height):
+        for x in range(width):
+            luma[row, x] = _luma(image, row, x)
     for row in prange(height):
         y = np.int64(row)  # a parallel loop's index may be unsigned, and y - 1 must not wrap
         for x in range(width):
-            m = _luma(image, y, x)
-            n, s, w, e = _luma(image, y - 1, x), _luma(image, y + 1, x), _luma(image, y, x - 1), _luma(image, y, x + 1)
+            m = luma[y, x]
+            n, s, w, e = _near(luma, y - 1, x), _near(luma, y + 1, x), _near(luma, y, x - 1), _near(luma, y, x + 1)
             brightest = max(m, n, s, w, e)
             span = brightest - min(m, n, s, w, e)
             for c in range(image.shape[2]):
                 out[y, x, c] = image[y, x, c]
             if span < max(EDGE_FLOOR, EDGE_CONTRAST * brightest):
                 continue
-            nw, ne = _luma(image, y - 1, x - 1), _luma(image, y - 1, x + 1)
-            sw, se = _luma(image, y + 1, x - 1), _luma(image, y + 1, x + 1)
+            nw, ne = _near(luma, y - 1, x - 1), _near(luma, y - 1, x + 1)
+            sw, se = _near(luma, y + 1, x - 1), _near(luma, y + 1, x + 1)
             across_rows = 2.0 * abs(n + s - 2.0 * m) + abs(ne + se - 2.0 * e) + abs(nw + sw - 2.0 * w)
             across_columns = 2.0 * abs(e + w - 2.0 * m) + abs(ne + nw - 2.0 * n) + abs(se + sw - 2.0 * s)
             if across_rows >= across_columns:  # a horizontal edge: blend with the pixel above or below
