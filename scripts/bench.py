@@ -603,11 +603,13 @@ this machine on 2026-12-03, one commit (8ff25c5) simulated happy on the Hopper f
 18-27 ms by the thesis's update over separate runs (the Xeon: 9.25-11.7 ms), and llvmpipe
 drew the head's 512² frame in 34-37 ms (the Xeon: 17-19). Three targets met on the Xeon
 were missed in this morning's run here (`prange` 1.49x, 20.5 frames per second, 3.77 s
-for a fresh render); in this afternoon's run `prange` (1.74x, the same simulation code)
-and the frames per second (29.2, after the render changes below) are met, and the fresh
-render misses by 0.06 s. Changes are therefore measured side by side in one process (the
-old and the new code imported together, alternating runs), not across runs of this
-script.
+for a fresh render). After the render changes below, three runs this afternoon met the
+frames per second every time (29.2, 29.6, 32.3), and gave for the same simulation code
+`prange` 1.74x, 1.51x and 1.64x (this run), happy on the Hopper face 18.0, 13.8 and 12.4
+ms, and for the same rendering code (the last two) a fresh render 3.58 s and 3.02 s
+(this run, by 0.02 s over the target). Changes are therefore measured side by side in
+one process (the old and the new code imported together, alternating runs), not across
+runs of this script.
 
 - **Rendering (2026-12-03, afternoon).** Three changes to how facesim drives pyrender,
   each drawing the same pixels (max difference 0), each measured side by side in one
@@ -618,12 +620,14 @@ script.
   where pyrender sets all of them before each of the head's nine parts, 162 calls a
   frame through PyOpenGL (25.7 -> 24.4 ms; at 128² 16.3 -> 14.7); and a frame drawn with
   one sample a pixel is read where it was drawn, without the blit into pyrender's second
-  framebuffer (29.1 -> 27.4 and 25.8 -> 24.4 ms). Where the frame's time goes now
+  framebuffer (29.1 -> 27.4 and 25.8 -> 24.4 ms); and the edge filter takes each pixel's
+  luma once, where it took nine (1.51 -> 0.95 ms a frame, the same bytes over 56 frames
+  of four expressions). Where the frame's time goes now
   (512², one process): drawing and reading back about 23 ms, of which the skin's
   shading is about 9 (the same frame with a flat shader: 13.6 against 25.1 ms) and a
   fixed 10-12 ms at any size (128²: 12-17 ms a frame), the draw calls' vertex work and
-  pyrender's Python; the edge filter 1.6-2.2 ms, the skin carried from the simulated
-  mesh 1.1, the normals and vertex arrays 0.9. Tried and not kept: `gc.freeze()` after
+  pyrender's Python; the skin carried from the simulated mesh 1.1 ms, the edge filter
+  1.0, the normals and vertex arrays 0.9. Tried and not kept: `gc.freeze()` after
   the renderer is built (within noise; a full collection here takes 100 ms, but they
   are rare), x264 with fewer threads beside llvmpipe (within noise).
 
@@ -644,7 +648,8 @@ script.
   they are: a gathering pass of their own made them slower (springs 68 -> 84 ns a
   vertex), so they keep the old form (within this machine's noise of it).
 - **Simulation, 2 ms for happy on the Hopper face.** Not met: 18.0 ms by the thesis's
-  update in this run (15.8 in this morning's), four steps a frame, 140 steps of about 110 µs; the implicit solver takes
+  update in this run (13.8 and 18.0 in this afternoon's two before, 15.8 in this
+  morning's), four steps a frame, 140 steps of 90-130 µs; the implicit solver takes
   one step a frame, but its step is the force terms, their links of K (a scalar loop of
   their own) and about eight conjugate-gradient iterations, each a product over the links
   about as costly as the springs and the repulsion together (the profile). 2 ms is 14 µs
@@ -664,8 +669,9 @@ script.
   26.6 ms against Jacobi's 22.0 (2026-12-02), each iteration's two triangular solves
   costing more than the iterations they save.
 - **10 million vertex-steps per second per core at 28k vertices.** Not met: 3.9 million
-  in this run (255 ns per vertex-step at 27,614, the scaling table), 2.9 million (348 ns)
-  in this morning's with the same simulation code (2.7 million, 373 ns, before the vector
+  in this run (261 ns per vertex-step at 27,614, the scaling table; 3.7-3.9 million over
+  three runs this afternoon), 2.9 million (348 ns) in this morning's with the same
+  simulation code (2.7 million, 373 ns, before the vector
   lanes), 7.1-7.5 million on the Xeon on 2026-12-02 (134-141 ns). Profiled
   here after the vector lanes (2026-12-03, 27,614 vertices, happy at frame 12, one
   thread, per vertex-step, the range of three runs in three processes): the muscles
@@ -693,9 +699,9 @@ script.
   27,614 vertices (one process, one thread, 2026-12-03; g within 1e-6 of float64's), the
   loop being bound by its memory, not its lanes, and the scalar scatters and fills
   around it would not change.
-- **`prange`, 2 threads against 1: met in this run (1.74x at 27,614, 1.69x at 6,990),
-  missed in this morning's with the same simulation code (1.49x); met on the Xeon (1.71x
-  at 27,614 on 2026-12-02).** The springs, the edge repulsion, the
+- **`prange`, 2 threads against 1: 1.64x in this run at 27,614 (1.69x at 6,990, 1.75x at
+  109,758), 1.49-1.74x over four runs of the same simulation code on this machine on
+  2026-12-03, met in one of them; met on the Xeon (1.71x at 27,614 on 2026-12-02).** The springs, the edge repulsion, the
   bending, the muscles' flood fills (the muscles split by fixed slices,
   kernels._find_regions) and each muscle's region loop run on every core for a mesh of
   at least 4,000 vertices (facesim.config.PARALLEL_FROM), scattering by fixed slices into
@@ -708,7 +714,7 @@ script.
   the vector lanes the arithmetic a core does shrank, and the scatters and gathers,
   bound by memory the two cores share, are a larger part of the step; the ratio was
   1.58x in this script's run before them and 1.49x after, which this machine's noise
-  between runs accounts for: this run's 1.74x is the same simulation code. What would raise
+  between runs accounts for: the same simulation code gave 1.74x in a run this afternoon. What would raise
   it: the same fused scatter, which reads and writes each vertex's buffers once. The 468-vertex faces run their loops on one thread,
   where a parallel region's start outweighs its share of the step; during a render
   llvmpipe already runs on both cores.
@@ -724,11 +730,13 @@ script.
   everything again; facesim's own cache locator files them by a hash of the code and the
   package's name instead (facesim.config), and a copy elsewhere now loads them (a fresh
   render from a copy: 87 s -> 2.7 s; tests/test_cache.py).
-- **The head's frame against its floor, 1.2x: met in this run (1.13x at 512², 1.17x at
-  256²), at the edge of it: a run of this afternoon's with only the first two render
-  changes gave 1.36x and 1.28x, and two runs of the head's table alone 1.14x and 1.28x at
-  512².** The render changes above apply to the floor as well, so it is faster (23.0 ms
-  here at 512²) and facesim's same few milliseconds weigh more against it. The floor draws the same scene with the same renderer and antialiasing and uploads vertex
+- **The head's frame against its floor, 1.2x: at the edge, 1.20x at 512² and 1.25x at
+  256² in this run (medians of 7 since this run, of 3 before); 1.13-1.37x at 512² over
+  three runs this afternoon.** Interleaved in one process, eight times 35 frames each,
+  facesim's frame took 23.9 ms against the floor's 21.7 at 512² (1.10x): the spread
+  between runs is this machine's noise over medians of a few repeats. The render changes
+  above apply to the floor as well, so it is faster (21.1 ms here at 512²) and facesim's
+  same few milliseconds weigh more against it. The floor draws the same scene with the same renderer and antialiasing and uploads vertex
   arrays computed before the clock starts, so what is over it is facesim's per-frame
   work, a fixed few milliseconds that weigh more against the smaller frame. Profiled on
   the Xeon at 512² (22-24 ms a frame): drawing and reading back 17-19 ms, the edge filter
@@ -738,10 +746,11 @@ script.
   written in place 0.3 ms (facesim.render._interleave), the uploads 0.2 ms. What would
   close it: the skin and normals of the next frame computed while llvmpipe draws this
   one (a nogil kernel in a second thread).
-- **25 frames per second end to end on the head at 512², antialiased: met, 29.2 in this
-  run (20.5 in this morning's, 24.0 in the one before), 34.8 on the Xeon (2026-12-02).**
-  What made it here: the three render changes above (facesim's frame 25.9 ms in this run;
-  the floor alone was 34-37 ms in this morning's). Measured end to end in one process
+- **25 frames per second end to end on the head at 512², antialiased: met, 32.3 in this
+  run (29.2 and 29.6 in this afternoon's two before; 20.5 in this morning's, 24.0 in the
+  one before), 34.8 on the Xeon (2026-12-02).** What made it here: the render changes
+  above (facesim's frame 25.2 ms in this run; the floor alone was 34-37 ms in this
+  morning's). Measured end to end in one process
   (2026-12-03): 35 frames in 1.05-1.31 s, of which the simulation 0.04 s, drawing 0.84-1.07 s
   with the encoder running beside it on the same two cores (x264 alone takes 0.2 s for
   the 35), the sends to it 0.1 s, its close 0.03 s and reading the file back 0.03-0.04
@@ -752,8 +761,9 @@ script.
   `--supersample` keeps the 4 samples), and the head's opaque parts culling their back
   faces (12-15% of a frame). Multisampling costs more in llvmpipe (108 ms at 512² with 2
   or 4 samples, measured on 2026-12-01).
-- **3 s for `facesim render` in a fresh process: 3.06 s in this run (2.98-3.32 over its
-  three), 3.77 s in this morning's, 2.64 s on the Xeon.** Profiled here this afternoon
+- **3 s for `facesim render` in a fresh process: missed by 0.02 s in this run, 3.02 s
+  (2.94-3.26 over its five runs); 3.06 s and 3.58 s in this afternoon's two before, 3.77 s
+  in this morning's, 2.64 s on the Xeon.** Profiled here this afternoon
   (`python -X importtime`, one process): of about 3.3 s, the imports are 1.2-1.7 s:
   facesim with Numba 0.55 s, SciPy's optimize module 0.34 s (which trimesh imports
   anyway; SciPy 1.17 parses docstrings at import for its array-API notes, and 1.15 imports
@@ -763,9 +773,16 @@ script.
   its cached kernels loaded), the simulation 0.18 s, the figure 0.07 s, the GL context,
   scene and shaders 0.3 s, and the 35 frames at about 25 ms. Tried: pyrender imported in
   a second thread while the model builds: no gain (3.64-3.94 s against 3.69-4.56 s over
-  four pairs of runs; imports hold the interpreter's lock). What would close it: the
-  drawing in a process of its own, started with the command, that imports pyrender,
-  builds the figure and opens its context while the main process simulates.
+  four pairs of runs; imports hold the interpreter's lock); and a process forked when the
+  command starts that loads the head, builds its figure, imports pyrender and opens its
+  context while this one builds the model and simulates, then draws the frames it is
+  sent: 3.67 s against 3.73 (medians of five pairs of runs; not kept). That process
+  was the longer of the two (its imports, the head and its figure 0.67 s after the fork,
+  pyrender, the context, scene and shaders 0.86 s more, against 1.2 s for the model and
+  the simulation), so it could save at most the simulation's share, 0.2 s, and the two
+  processes sharing two cores took that back. What would close it: less to import
+  (pyrender brings trimesh, trimesh SciPy's optimize and spatial modules and networkx:
+  0.6 s of every fresh process) and frames drawn faster.
   Profiled there (3.0-3.5 s wall before the changes named): importing the command line
   0.3 s; the model 0.6 s (with the imports of trimesh and SciPy it needs); the
   simulation 0.2 s (Numba's cached kernels loaded); the head's figure 0.06 s; the GL
@@ -778,10 +795,10 @@ script.
   0.5 s), Numba's cached kernels loaded 0.6 s, the simulation 0.3 s, the writing 2.5 s.
   Taking SciPy's assignment solver out of the head's mirror map saved nothing, since
   trimesh imports the same modules (tried, reverted).
-- **50 ms for happy on the head: met in this script's process, 45.1 ms in this run (38.1
-  in this morning's)** (38 ms on the Xeon); the head's table above, which times the same
-  run in a process of its own, gives 45.6 and 55.0 ms in this run (51.6-54.2 in this
-  morning's), at and over the target. That is this machine's noise between processes, not pyrender: the median of
+- **50 ms for happy on the head: met in this script's process, 36.1 ms in this run
+  (45.1 and 49.3 in this afternoon's two before, 38.1 in this morning's)** (38 ms on the
+  Xeon); the head's table above, which times the same run in a process of its own, gives
+  36.4 and 43.0 ms in this run (51.6-54.2 in this morning's). That is this machine's noise between processes, not pyrender: the median of
   nine runs in six fresh processes was 42-58 ms, alike whether pyrender was imported
   and a GL context made first or not (2026-12-03). On this machine the target is met in
   some processes and missed in others. Side by side in
@@ -862,7 +879,7 @@ def main() -> int:
     section("Compilation, measured apart", text + "\n\nEach row is one fresh process; `cache=True` keeps compiled "
             "kernels on disk, so only the first run of this code on a machine pays for compilation, whichever copy "
             "of facesim runs it (facesim.config).")
-    wall, walls, peak_mb = fresh_render_wall(1 if quick else 3, 64 if quick else 512)
+    wall, walls, peak_mb = fresh_render_wall(1 if quick else 5, 64 if quick else 512)
     section("`facesim render expressions/happy.yaml` in a fresh process, caches warm (the default head, 512² MP4)",
             f"median wall {wall:.2f} s over {len(walls)} runs: " + ", ".join(f"{w:.2f}" for w in walls) +
             f"; peak memory (maximum resident set) {peak_mb:.0f} MB")
@@ -876,7 +893,7 @@ def main() -> int:
             "with the same renderer and settings, antialiased the same way (the edge filter), and updates nothing; "
             "facesim's frame adds the vertex normals (Numba) and the in-place vertex-buffer upload.")
 
-    text, head_figures = head([64] if quick else [256, 512], 1 if quick else 3)
+    text, head_figures = head([64] if quick else [256, 512], 1 if quick else 7)
     section("The default head (ICT FaceKit), happy", text)
 
     throughput = dataset_throughput(6, 64, (1,)) if quick else dataset_throughput(120, 256)  # quick: one worker of each
