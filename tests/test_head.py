@@ -111,22 +111,40 @@ def test_the_face_framing_fills_the_frame_with_the_face():
         RenderSettings(framing="torso")
 
 
+def _ours_and_pyrenders(animation, settings, arrows=None):
+    """The last frame drawn with facesim's lit shader, then with pyrender's own."""
+    last = animation.frames - 1
+    with FaceRenderer.of(animation, settings) as renderer:
+        from pyrender.shader_program import ShaderProgramCache  # after the renderer has chosen the GL platform
+
+        ours = renderer.frame(animation, last, None if arrows is None else arrows[last])
+        programs = renderer._renderer._renderer._program_cache
+        renderer._renderer._renderer._program_cache = ShaderProgramCache()
+        theirs = renderer.frame(animation, last, None if arrows is None else arrows[last])
+        renderer._renderer._renderer._program_cache = programs
+    assert type(programs) is not ShaderProgramCache  # facesim's shader was in use
+    return ours.astype(int), theirs.astype(int)
+
+
 def test_the_lit_shader_draws_what_pyrenders_draws():
     """facesim's lit shader (facesim/shaders/mesh.frag) is pyrender's BRDF without the
     paths facesim does not use: the apex of happy on the head, skin, eyes and teeth, comes
     out the same within one level as with pyrender's own shader."""
-    animation = simulate(spec("happy"))
-    with FaceRenderer.of(animation, RenderSettings(128, 128)) as renderer:
-        from pyrender.shader_program import ShaderProgramCache  # after the renderer has chosen the GL platform
-
-        ours = renderer.frame(animation, animation.frames - 1)
-        programs = renderer._renderer._renderer._program_cache
-        renderer._renderer._renderer._program_cache = ShaderProgramCache()
-        theirs = renderer.frame(animation, animation.frames - 1)
-        renderer._renderer._renderer._program_cache = programs
-    assert type(programs) is not ShaderProgramCache  # facesim's shader was in use
+    ours, theirs = _ours_and_pyrenders(simulate(spec("happy")), RenderSettings(128, 128))
     assert (theirs != theirs[0, 0]).any(axis=2).mean() > 0.3  # the face fills the frame
-    assert np.abs(ours.astype(int) - theirs.astype(int)).max() <= 1
+    assert np.abs(ours - theirs).max() <= 1
+
+
+def test_the_lit_shader_draws_lines_as_pyrender_does():
+    """Lines have no normals: the lit shader turns them to the camera, as pyrender's does,
+    so --show-muscles draws its arrows red (with the normal left undefined they came out
+    up to 14 levels off, and black once the lights' loop had a fixed length)."""
+    from facesim.output import arrows_for
+
+    animation = simulate(spec("surprise"))
+    ours, theirs = _ours_and_pyrenders(animation, RenderSettings(128, 128, show_muscles=True), arrows_for(animation))
+    assert ((ours[..., 0] > 150) & (ours[..., 1] < 80)).sum() > 20
+    assert np.abs(ours - theirs).max() <= 1
 
 
 def test_a_renderer_that_skips_unchanged_uniforms_draws_each_change_of_view(monkeypatch):
