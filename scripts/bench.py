@@ -622,7 +622,9 @@ runs of this script.
   one sample a pixel is read where it was drawn, without the blit into pyrender's second
   framebuffer (29.1 -> 27.4 and 25.8 -> 24.4 ms); and the edge filter takes each pixel's
   luma once, where it took nine (1.51 -> 0.95 ms a frame, the same bytes over 56 frames
-  of four expressions). Where the frame's time goes now
+  of four expressions). Lines have no normals: the shader turns them to the camera as
+  pyrender's does, where the fixed loop had drawn the muscle arrows black (a test
+  compares them with pyrender's, tests/test_head.py). Where the frame's time goes now
   (512², one process): drawing and reading back about 23 ms, of which the skin's
   shading is about 9 (the same frame with a flat shader: 13.6 against 25.1 ms) and a
   fixed 10-12 ms at any size (128²: 12-17 ms a frame), the draw calls' vertex work and
