@@ -584,7 +584,7 @@ class FaceRenderer:
                     "install Debian's libosmesa6 or try --backend egl"
                 ) from None
             _share_egl_display(self._renderer)
-            multisampled = not (supersample or self._smooth or not settings.antialias)
+            multisampled = settings.antialias and not supersample and not self._smooth  # lines, antialiased
             if not multisampled:
                 _single_sample(self._renderer._renderer)
             _lit_shader(self._renderer._renderer, len(self._lights))

@@ -62,12 +62,12 @@ void main()
     vec3 c_diff = mix(vec3(0.0), base_color.rgb * (1.0 - MIN_ROUGHNESS), 1.0 - metallic);
     vec3 f0 = mix(vec3(MIN_ROUGHNESS), base_color.rgb, metallic);
 
+    vec3 v = normalize(cam_pos - frag_position);
 #ifdef NORMAL_LOC
     vec3 n = normalize(frag_normal);
 #else
-    vec3 n = normalize(cam_pos - frag_position);  // lines have no normals: they face the camera, as in pyrender
+    vec3 n = v;  // lines have no normals: they face the camera, as in pyrender
 #endif
-    vec3 v = normalize(cam_pos - frag_position);
     float nv = clamp(abs(dot(n, v)), 0.001, 1.0);
     float g_v = nv / (nv * (1.0 - k) + k);
 
