@@ -585,7 +585,7 @@ def profile(repeats: int) -> tuple[str, dict]:
             times.append(median(timed(lambda: looped(which, count, arrays, xp, control, work, forces, krylov, h), 3)) / count)
         columns[label] = [f"{t * 1e6:,.1f}" for t in times] + [
             f"{np.median(iterations):.0f} (at most {max(iterations)})",
-            f"{factorised * 1e3:,.0f} ({factor.lower_value.size + factor.upper_value.size:,} entries)"
+            f"{factorised * 1e3:,.0f} ({9 * (factor.lower_block.shape[0] + factor.upper_block.shape[0]) + 18 * factor.order.size:,} entries in 3x3 blocks)"
             if factored else "Jacobi: none"]
         figures[label] = dict(zip(PROFILE_TERMS, times), iterations=float(np.median(iterations)))
     rows = [[name] + [columns[label][k] for label in columns] for k, name in
