@@ -124,9 +124,9 @@ def iter_frames(animation: Animation, settings: RenderSettings, backend: str = "
         own = renderer is None
         renderer = renderer or FaceRenderer.of(animation, settings, backend)
         try:
-            for k in range(frames):
+            for image in renderer.frames(animation, arrows):
                 check_terminated()  # a signal that the OpenGL wrappers swallowed stops here
-                yield renderer.frame(animation, k, None if arrows is None else arrows[k])
+                yield image
                 if progress:
                     progress(1)
         finally:

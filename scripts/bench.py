@@ -147,7 +147,7 @@ for name in names:
     renderer.render(a.positions[0])
     render, encode = [], []
     for _ in range(repeats):
-        t = time.perf_counter(); frames = np.stack([renderer.render(p) for p in a.positions]); render.append(time.perf_counter() - t)
+        t = time.perf_counter(); frames = np.stack(list(renderer.frames(a))); render.append(time.perf_counter() - t)
         t = time.perf_counter(); write_frames(frames, __import__("pathlib").Path("/tmp/facesim-bench.mp4"), "mp4", 25); encode.append(time.perf_counter() - t)
     out[name] = dict(render=statistics.median(render), encode=statistics.median(encode))
 print(json.dumps(out))
@@ -374,7 +374,7 @@ for p in a.positions[:3]: r.render(p)
 ours, floor = [], []
 for _ in range(repeats):
     t = time.perf_counter()
-    for p in a.positions: r.render(p)
+    for image in r.frames(a): pass
     ours.append((time.perf_counter() - t) / frames)
     # the floor: the same scene, the same renderer, settings and antialiasing, nothing updated
     t = time.perf_counter()
@@ -450,7 +450,7 @@ def floor_frame(data, programs):
 floor_frame(buffers[0], programs["pbr"])
 ours, floor, pbr, encode = [], [], [], []
 for _ in range(repeats):
-    t = time.perf_counter(); frames = np.stack([r.frame(a, k) for k in range(a.frames)]); ours.append((time.perf_counter() - t) / a.frames)
+    t = time.perf_counter(); frames = np.stack(list(r.frames(a))); ours.append((time.perf_counter() - t) / a.frames)
     for times, which in ((floor, "lit"), (pbr, "pbr")):
         t = time.perf_counter()
         for data in buffers:
@@ -497,7 +497,9 @@ def head(sizes: list[int], repeats: int) -> tuple[str, dict]:
              "vertex buffers, computed before the clock starts, and renders the same scene with the same renderer "
              "and antialiasing: "
              "facesim's frame adds the skin's interpolation (facesim.figure), the jaw, the eyelid contact and the "
-             f"normals. Building the head's figure the first time in a process: {h['build']:.2f} s (its skin "
+             "normals, computed for each frame on a second thread while the frame before it draws, which is also "
+             "where each drawn frame is filtered while the next one draws (FaceRenderer.frames, as `facesim render` "
+             f"draws an animation). Building the head's figure the first time in a process: {h['build']:.2f} s (its skin "
              "weights read from facesim's on-disk cache; solving for them takes about 1.2 s, once per machine). "
              "Antialiasing filters each frame along its edges (facesim.render, an FXAA-style pass); --supersample "
              "renders at twice the size and averages, 4 samples per pixel. Simulation: median of warm "
@@ -893,7 +895,9 @@ def main() -> int:
     text, render_figures = rendering([64] if quick else [256, 512, 1024], 1 if quick else 3, 12 if quick else 70)
     section("Rendering: facesim against the bare pyrender floor", text + "\n\nThe floor renders the same scene "
             "with the same renderer and settings, antialiased the same way (the edge filter), and updates nothing; "
-            "facesim's frame adds the vertex normals (Numba) and the in-place vertex-buffer upload.")
+            "facesim's frame adds the vertex normals (Numba) and the in-place vertex-buffer upload; its frames "
+            "are drawn as `facesim render` draws an animation (FaceRenderer.frames: each frame's arrays computed, "
+            "and each drawn frame filtered, on a second thread while another draws).")
 
     text, head_figures = head([64] if quick else [256, 512], 1 if quick else 7)
     section("The default head (ICT FaceKit), happy", text)

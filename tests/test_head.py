@@ -172,6 +172,27 @@ def test_a_renderer_that_skips_unchanged_uniforms_draws_each_change_of_view(monk
     assert (first != turned).any() and (first == back).all()
 
 
+def test_frames_drawn_two_in_flight_are_the_frames_drawn_one_by_one():
+    """``FaceRenderer.frames`` computes each frame's vertex arrays on a second thread while
+    the frame before it draws, and filters each drawn frame there while the next one
+    draws: the head turning, its eyes leading and smiling (look_left), and the skin's
+    wireframe with the muscles' arrows over it, come out byte for byte as ``frame``
+    draws them one after another, every frame in its place."""
+    from facesim.output import arrows_for
+
+    animation = simulate(spec("look_left"))
+    assert animation.pose is not None
+    for settings, arrows in ((RenderSettings(96, 96), None),
+                             (RenderSettings(96, 96, wireframe=True, show_muscles=True), arrows_for(animation))):
+        with FaceRenderer.of(animation, settings) as renderer:
+            one_by_one = [renderer.frame(animation, k, None if arrows is None else arrows[k]) for k in range(animation.frames)]
+            in_flight = list(renderer.frames(animation, arrows))
+        assert len(in_flight) == animation.frames
+        for ours, theirs in zip(in_flight, one_by_one):
+            np.testing.assert_array_equal(ours, theirs)
+        assert (one_by_one[0] != one_by_one[-1]).any() and (one_by_one[-2] != one_by_one[-1]).any()
+
+
 def test_antialiasing_by_the_edge_filter_comes_toward_four_samples_per_pixel():
     """The default antialiasing filters the frame as drawn along its edges
     (render._smooth_edges): happy's apex on the head comes nearer the same frame drawn
