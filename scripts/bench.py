@@ -600,18 +600,44 @@ ANALYSIS = """### Where the targets stand: the missed ones and what would close 
 
 The per-step profile above (each kernel looped in compiled code, so no call overhead) names
 where a step's time goes. **The machine moves the figures more than the code does.** This
-run is on an AMD EPYC (Zen 4, 2 cores); the run of 2026-12-02 was on an Intel Xeon. On
-this machine on 2026-12-03, one commit (8ff25c5) simulated happy on the Hopper face in
-18-27 ms by the thesis's update over separate runs (the Xeon: 9.25-11.7 ms), and llvmpipe
-drew the head's 512² frame in 34-37 ms (the Xeon: 17-19). Three targets met on the Xeon
-were missed in this morning's run here (`prange` 1.49x, 20.5 frames per second, 3.77 s
-for a fresh render). After the render changes below, three runs this afternoon met the
-frames per second every time (29.2, 29.6, 32.3), and gave for the same simulation code
-`prange` 1.74x, 1.51x and 1.64x (this run), happy on the Hopper face 18.0, 13.8 and 12.4
-ms, and for the same rendering code (the last two) a fresh render 3.58 s and 3.02 s
-(this run, by 0.02 s over the target). Changes are therefore measured side by side in
-one process (the old and the new code imported together, alternating runs), not across
-runs of this script.
+run is on an AMD EPYC (Zen 4, 2 cores) whose memory manager keeps evicting the page
+cache (its `kdamond` thread): the same code gave, in two runs of this script 20 minutes
+apart this evening, the NumPy reference's step 61 and 38 ms, a fresh render 3.38 s and
+3.98 s (this run), 29.7 and 26.5 frames per second end to end, `prange` 1.42x and 1.60x
+(this run); a fresh render by hand between them took 3.4-8.2 s, and 2.93-3.29 s (median
+3.04) an hour before. On 2026-12-02 the runs were on an Intel Xeon. Changes are
+therefore measured side by side in one process (the old and the new code imported
+together, alternating runs), not across runs of this script.
+
+- **This evening (2026-12-03): the head's preconditioner by blocks, an animation's frames
+  drawn two in flight, the muscles' back-projection inlined.**
+  - The implicit step's preconditioner, the rest system's LU factors (facesim.solver),
+    took two thirds of the head's step: two triangular solves entry by entry, 170 µs each
+    time and about four times a step. The vertices are now put in a minimum-degree order
+    of their own graph with each vertex's three coordinates together, so that the factors
+    are made of 3x3 blocks, and the solves run block by block: 55-70 µs (the profile's
+    "applied once" 54.5 µs in this run, 173.1 this afternoon), the same 180,000 entries.
+    Happy on the head 55 -> 31 ms side by side in one process, the positions the same to
+    4e-15 cm; 20.6 ms in this run against 36.1 in this afternoon's. Factorising takes a
+    few ms more, once per model (31 ms in this run). Tried and not kept: the solves entry
+    by entry by rows instead of columns (310 µs), float32 values or int32 indices (no
+    gain).
+  - An animation's frames are drawn two in flight (`FaceRenderer.frames`, what `facesim
+    render` and this script's frame timings use): each frame's vertex arrays are
+    computed on a second thread while the frame before it draws, and each drawn frame is
+    filtered there while the next one draws, where llvmpipe's vertex work on the calling
+    thread left a core idle. The same bytes (tests/test_head.py draws look_left, and the
+    wireframe with the muscles' arrows, both ways, and fails when the two frames share one
+    set of arrays); side by side in one process, the head 16.9 -> 13.1 ms a frame at 256²
+    and 21.1 -> 18.5 at 512², the mask 4.2 -> 3.3.
+  - The muscles' back-projection (eq. 3.22-3.25) is inlined into their loop, where a call
+    per region vertex handed over the ring's arrays: the muscles at frame 12 of happy,
+    looped, 99.6 -> 91.7 ns a vertex on the Hopper face, 85.9 -> 71.4 at 27,614 vertices
+    on one thread and 46.3 -> 37.4 on two. Tried and not kept: inlining the links'
+    helpers, the falloff and the frame's point (nothing measured), inlining `_set_link`
+    into the parallel loops (it broke the step: Numba drops writes made there through a
+    tuple's arrays, and the head's happy inverted a triangle at frame 26), and a lone
+    wedge's direction taken without its weight (slower).
 
 - **Rendering (2026-12-03, afternoon).** Three changes to how facesim drives pyrender,
   each drawing the same pixels (max difference 0), each measured side by side in one
@@ -651,9 +677,9 @@ runs of this script.
   step's loops, which also write the links of K, stay scalar and read the positions where
   they are: a gathering pass of their own made them slower (springs 68 -> 84 ns a
   vertex), so they keep the old form (within this machine's noise of it).
-- **Simulation, 2 ms for happy on the Hopper face.** Not met: 18.0 ms by the thesis's
-  update in this run (13.8 and 18.0 in this afternoon's two before, 15.8 in this
-  morning's), four steps a frame, 140 steps of 90-130 µs; the implicit solver takes
+- **Simulation, 2 ms for happy on the Hopper face.** Not met: 12.8 ms by the thesis's
+  update in this run (12.0 in this evening's run before; 12.4, 13.8 and 18.0 this
+  afternoon), four steps a frame, 140 steps of 80-130 µs; the implicit solver takes
   one step a frame, but its step is the force terms, their links of K (a scalar loop of
   their own) and about eight conjugate-gradient iterations, each a product over the links
   about as costly as the springs and the repulsion together (the profile). 2 ms is 14 µs
@@ -672,9 +698,10 @@ runs of this script.
   preconditioner: the Hopper face's system at rest factorised (60,275 entries) made happy
   26.6 ms against Jacobi's 22.0 (2026-12-02), each iteration's two triangular solves
   costing more than the iterations they save.
-- **10 million vertex-steps per second per core at 28k vertices.** Not met: 3.9 million
-  in this run (261 ns per vertex-step at 27,614, the scaling table; 3.7-3.9 million over
-  three runs this afternoon), 2.9 million (348 ns) in this morning's with the same
+- **10 million vertex-steps per second per core at 28k vertices.** Not met: 3.45 million
+  in this run (290 ns per vertex-step at 27,614, the scaling table; 4.11 million in this
+  evening's run before, with the back-projection inlined; 3.7-3.9 million over three
+  runs this afternoon), 2.9 million (348 ns) in this morning's with the same
   simulation code (2.7 million, 373 ns, before the vector
   lanes), 7.1-7.5 million on the Xeon on 2026-12-02 (134-141 ns). Profiled
   here after the vector lanes (2026-12-03, 27,614 vertices, happy at frame 12, one
@@ -703,9 +730,9 @@ runs of this script.
   27,614 vertices (one process, one thread, 2026-12-03; g within 1e-6 of float64's), the
   loop being bound by its memory, not its lanes, and the scalar scatters and fills
   around it would not change.
-- **`prange`, 2 threads against 1: 1.64x in this run at 27,614 (1.69x at 6,990, 1.75x at
-  109,758), 1.49-1.74x over four runs of the same simulation code on this machine on
-  2026-12-03, met in one of them; met on the Xeon (1.71x at 27,614 on 2026-12-02).** The springs, the edge repulsion, the
+- **`prange`, 2 threads against 1: 1.60x in this run at 27,614 (1.87x at 6,990, 1.54x at
+  109,758), 1.42x in this evening's run before; 1.49-1.74x over four runs of the
+  afternoon's simulation code on this machine, met in one of them; met on the Xeon (1.71x at 27,614 on 2026-12-02).** The springs, the edge repulsion, the
   bending, the muscles' flood fills (the muscles split by fixed slices,
   kernels._find_regions) and each muscle's region loop run on every core for a mesh of
   at least 4,000 vertices (facesim.config.PARALLEL_FROM), scattering by fixed slices into
@@ -734,27 +761,23 @@ runs of this script.
   everything again; facesim's own cache locator files them by a hash of the code and the
   package's name instead (facesim.config), and a copy elsewhere now loads them (a fresh
   render from a copy: 87 s -> 2.7 s; tests/test_cache.py).
-- **The head's frame against its floor, 1.2x: at the edge, 1.20x at 512² and 1.25x at
-  256² in this run (medians of 7 since this run, of 3 before); 1.13-1.37x at 512² over
-  three runs this afternoon.** Interleaved in one process, eight times 35 frames each,
-  facesim's frame took 23.9 ms against the floor's 21.7 at 512² (1.10x): the spread
-  between runs is this machine's noise over medians of a few repeats. The render changes
-  above apply to the floor as well, so it is faster (21.1 ms here at 512²) and facesim's
-  same few milliseconds weigh more against it. The floor draws the same scene with the same renderer and antialiasing and uploads vertex
-  arrays computed before the clock starts, so what is over it is facesim's per-frame
-  work, a fixed few milliseconds that weigh more against the smaller frame. Profiled on
-  the Xeon at 512² (22-24 ms a frame): drawing and reading back 17-19 ms, the edge filter
-  1.3 ms (in the floor too), the head's skin carried from the simulated mesh (the
-  follow's sparse product, compiled and on both cores, facesim.figure._followed) 0.9 ms
-  looped and 1.6 ms between draws, the normals 0.4-0.7 ms, the nine parts' vertex arrays
-  written in place 0.3 ms (facesim.render._interleave), the uploads 0.2 ms. What would
-  close it: the skin and normals of the next frame computed while llvmpipe draws this
-  one (a nogil kernel in a second thread).
-- **25 frames per second end to end on the head at 512², antialiased: met, 32.3 in this
-  run (29.2 and 29.6 in this afternoon's two before; 20.5 in this morning's, 24.0 in the
-  one before), 34.8 on the Xeon (2026-12-02).** What made it here: the render changes
-  above (facesim's frame 25.2 ms in this run; the floor alone was 34-37 ms in this
-  morning's). Measured end to end in one process
+- **The head's frame against its floor, 1.2x: met, 1.01x at 256² and 1.06x at 512² in
+  this run (1.11x and 0.99x in this evening's run before; 1.25x and 1.20x this afternoon,
+  1.13-1.37x at 512² over its three runs).** What closed it is what this paragraph named
+  this afternoon as the way to close it: the next frame's skin, normals and vertex arrays
+  computed while llvmpipe draws this one, and the drawn frame's edge filter moved there
+  too (the frames in flight above). The floor draws the same scene with the same renderer
+  and antialiasing and uploads vertex arrays computed before the clock starts, one frame
+  after another; facesim's per-frame work (profiled on the Xeon at 512², 22-24 ms a
+  frame: the skin carried from the simulated mesh, facesim.figure._followed, 0.9 ms looped
+  and 1.6 ms between draws, the normals 0.4-0.7 ms, the nine parts' vertex arrays written
+  in place 0.3 ms, the uploads 0.2 ms, the edge filter 1.3 ms, which the floor also does)
+  now runs beside llvmpipe's vertex work instead of after it.
+- **25 frames per second end to end on the head at 512², antialiased: met, 26.5 in this
+  run (29.7 in this evening's run before; 32.3, 29.2 and 29.6 this afternoon; 20.5 this
+  morning), 34.8 on the Xeon (2026-12-02).** What made it here: the render changes
+  above (facesim's frame 25.4 ms in this run, the floor 24.1; the floor alone was 34-37
+  ms in this morning's run). Measured end to end in one process
   (2026-12-03): 35 frames in 1.05-1.31 s, of which the simulation 0.04 s, drawing 0.84-1.07 s
   with the encoder running beside it on the same two cores (x264 alone takes 0.2 s for
   the 35), the sends to it 0.1 s, its close 0.03 s and reading the file back 0.03-0.04
@@ -765,9 +788,13 @@ runs of this script.
   `--supersample` keeps the 4 samples), and the head's opaque parts culling their back
   faces (12-15% of a frame). Multisampling costs more in llvmpipe (108 ms at 512² with 2
   or 4 samples, measured on 2026-12-01).
-- **3 s for `facesim render` in a fresh process: missed by 0.02 s in this run, 3.02 s
-  (2.94-3.26 over its five runs); 3.06 s and 3.58 s in this afternoon's two before, 3.77 s
-  in this morning's, 2.64 s on the Xeon.** Profiled here this afternoon
+- **3 s for `facesim render` in a fresh process: missed, 3.98 s in this run (3.84-4.06
+  over its five runs), 3.38 s in this evening's run before (3.20-3.52); five by hand an
+  hour before them 2.93-3.29 s (median 3.04) with the same code, and 3.02, 3.06 and 3.58 s
+  in this afternoon's three runs, 2.64 s on the Xeon.** This evening's changes shorten two of its
+  parts, the head's simulation (the head's table) and its 35 frames (the frames in
+  flight); the rest is unchanged, and this machine's evicted page cache makes the
+  imports the most variable part (a first render after a pause took 8.2 s). Profiled here this afternoon
   (`python -X importtime`, one process): of about 3.3 s, the imports are 1.2-1.7 s:
   facesim with Numba 0.55 s, SciPy's optimize module 0.34 s (which trimesh imports
   anyway; SciPy 1.17 parses docstrings at import for its array-API notes, and 1.15 imports
@@ -799,16 +826,18 @@ runs of this script.
   0.5 s), Numba's cached kernels loaded 0.6 s, the simulation 0.3 s, the writing 2.5 s.
   Taking SciPy's assignment solver out of the head's mirror map saved nothing, since
   trimesh imports the same modules (tried, reverted).
-- **50 ms for happy on the head: met in this script's process, 36.1 ms in this run
-  (45.1 and 49.3 in this afternoon's two before, 38.1 in this morning's)** (38 ms on the
-  Xeon); the head's table above, which times the same run in a process of its own, gives
-  36.4 and 43.0 ms in this run (51.6-54.2 in this morning's). That is this machine's noise between processes, not pyrender: the median of
+- **50 ms for happy on the head: met, 20.6 ms in this run (19.6 in this evening's run
+  before; 36.1, 45.1 and 49.3 this afternoon, 38.1 this morning)** (38 ms on the Xeon),
+  since the preconditioner's solves by blocks (above); the head's table above, which
+  times the same run in a process of its own, gives 28.8 and 22.9 ms in this run
+  (51.6-54.2 in this morning's). That is this machine's noise between processes, not pyrender: the median of
   nine runs in six fresh processes was 42-58 ms, alike whether pyrender was imported
   and a GL context made first or not (2026-12-03). On this machine the target is met in
   some processes and missed in others. Side by side in
   one process (2026-12-01), the head's tied rim (issue 16) costs 7% over a pinned one.
-  The profile above names the muscles and the preconditioner as the largest parts of a
-  step.
+  The profile above now names the force terms (112 µs a step, the edge repulsion the
+  largest) and the conjugate gradients' products (46 µs each, three or four a step) as the
+  largest parts of a step, then the preconditioner (55 µs, four a step).
 """
 
 
