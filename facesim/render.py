@@ -723,9 +723,13 @@ class FaceRenderer:
         """Every frame of a facesim.simulate.Animation in order, as ``frame`` draws them,
         each frame's vertex arrays computed on a second thread while the frame before it
         draws, and each drawn frame filtered there while the next one draws (the same
-        bytes). The head's 35 frames of happy, side by side in one process (2026-12-03):
-        17.1 -> 13.7 ms a frame at 256², 23.7 -> 22.0 at 512². ``arrows`` (frames, n, 3)
-        as ``render``'s, frame by frame."""
+        bytes): llvmpipe's vertex work runs on the calling thread and left a core idle.
+        The head's 35 frames of happy, side by side in one process (2026-12-03): 16.9 ->
+        13.1 ms a frame at 256², 21.1 -> 18.5 at 512²; the mask at 256² 4.2 -> 3.3.
+        ``arrows`` (frames, n, 3) as ``render``'s, frame by frame."""
+        if animation.frames == 0:
+            return
+
         def prepare(k):
             return self._prepared(animation.positions[k], None if arrows is None else arrows[k], animation.pose_at(k),
                                   animation.jaw_at(k), k % 2)
