@@ -158,7 +158,7 @@ def _render_sample(root: Path, sid: str, animation, draw: dict, settings: Datase
     if settings.clip:
         from .output import write_frames
 
-        frames = np.stack([renderer.frame(animation, k, pose=tuple(pose.values())) for k in range(animation.frames)])
+        frames = np.stack(list(renderer.frames(animation, pose=tuple(pose.values()))))
         write_frames(frames, root / "clips" / f"{sid}.mp4", "mp4", animation.fps)
         image = frames[-1]
     else:

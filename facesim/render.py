@@ -719,20 +719,21 @@ class FaceRenderer:
         Returns (height, width, 3) uint8."""
         return self._finished(self._drawn(self._prepared(positions, arrows, pose, jaw)))
 
-    def frames(self, animation, arrows: np.ndarray | None = None):
+    def frames(self, animation, arrows: np.ndarray | None = None, pose=None):
         """Every frame of a facesim.simulate.Animation in order, as ``frame`` draws them,
         each frame's vertex arrays computed on a second thread while the frame before it
         draws, and each drawn frame filtered there while the next one draws (the same
         bytes): llvmpipe's vertex work runs on the calling thread and left a core idle.
         The head's 35 frames of happy, side by side in one process (2026-12-03): 16.9 ->
         13.1 ms a frame at 256², 21.1 -> 18.5 at 512²; the mask at 256² 4.2 -> 3.3.
-        ``arrows`` (frames, n, 3) as ``render``'s, frame by frame."""
+        ``arrows`` (frames, n, 3) as ``render``'s, frame by frame; ``pose`` (5,), one for
+        every frame instead of the animation's (as ``frame``'s)."""
         if animation.frames == 0:
             return
 
         def prepare(k):
-            return self._prepared(animation.positions[k], None if arrows is None else arrows[k], animation.pose_at(k),
-                                  animation.jaw_at(k), k % 2)
+            return self._prepared(animation.positions[k], None if arrows is None else arrows[k],
+                                  animation.pose_at(k) if pose is None else pose, animation.jaw_at(k), k % 2)
 
         with ThreadPoolExecutor(1, thread_name_prefix="facesim-frames") as pool:
             upcoming, finishing = pool.submit(prepare, 0), None

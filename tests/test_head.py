@@ -176,8 +176,9 @@ def test_frames_drawn_two_in_flight_are_the_frames_drawn_one_by_one():
     """``FaceRenderer.frames`` computes each frame's vertex arrays on a second thread while
     the frame before it draws, and filters each drawn frame there while the next one
     draws: the head turning, its eyes leading and smiling (look_left), and the skin's
-    wireframe with the muscles' arrows over it, come out byte for byte as ``frame``
-    draws them one after another, every frame in its place."""
+    wireframe with the muscles' arrows over it, and the animation held in one pose, come
+    out byte for byte as ``frame`` draws them one after another, every frame in its
+    place."""
     from facesim.output import arrows_for
 
     animation = simulate(spec("look_left"))
@@ -191,6 +192,12 @@ def test_frames_drawn_two_in_flight_are_the_frames_drawn_one_by_one():
         for ours, theirs in zip(in_flight, one_by_one):
             np.testing.assert_array_equal(ours, theirs)
         assert (one_by_one[0] != one_by_one[-1]).any() and (one_by_one[-2] != one_by_one[-1]).any()
+    held = np.array([10.0, -4.0, 3.0, -8.0, 5.0])  # one head and gaze pose for every frame, as a dataset's clip holds
+    with FaceRenderer.of(animation, RenderSettings(96, 96)) as renderer:
+        one_by_one = [renderer.frame(animation, k, pose=held) for k in range(animation.frames)]
+        in_flight = list(renderer.frames(animation, pose=held))
+    for ours, theirs in zip(in_flight, one_by_one):
+        np.testing.assert_array_equal(ours, theirs)
 
 
 def test_antialiasing_by_the_edge_filter_comes_toward_four_samples_per_pixel():
