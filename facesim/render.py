@@ -731,9 +731,8 @@ class FaceRenderer:
         if animation.frames == 0:
             return
 
-        def prepare(k):
-            return self._prepared(animation.positions[k], None if arrows is None else arrows[k],
-                                  animation.pose_at(k) if pose is None else pose, animation.jaw_at(k), k % 2)
+        def prepare(k):  # into slot k mod 2
+            return self._prepared_frame(animation, k, None if arrows is None else arrows[k], pose, k % 2)
 
         with ThreadPoolExecutor(1, thread_name_prefix="facesim-frames") as pool:
             upcoming, finishing = pool.submit(prepare, 0), None
@@ -836,7 +835,13 @@ class FaceRenderer:
     def frame(self, animation, k: int, arrows: np.ndarray | None = None, pose=None) -> np.ndarray:
         """Frame ``k`` of a facesim.simulate.Animation: its positions, jaw and pose (or
         ``pose`` instead)."""
-        return self.render(animation.positions[k], arrows, animation.pose_at(k) if pose is None else pose, animation.jaw_at(k))
+        return self._finished(self._drawn(self._prepared_frame(animation, k, arrows, pose)))
+
+    def _prepared_frame(self, animation, k: int, arrows, pose, slot: int = 0) -> tuple:
+        """``_prepared`` for frame ``k`` of an animation: its positions, jaw and pose (or
+        ``pose`` instead), the arrays written into ``slot``."""
+        return self._prepared(animation.positions[k], arrows, animation.pose_at(k) if pose is None else pose,
+                              animation.jaw_at(k), slot)
 
     @classmethod
     def of(cls, animation, settings: RenderSettings, backend: str = "auto") -> "FaceRenderer":
