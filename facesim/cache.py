@@ -32,9 +32,11 @@ def key(*parts: bytes) -> str:
     return digest.hexdigest()
 
 
-def cached_arrays(name: str, digest: str, compute) -> dict[str, np.ndarray]:
+def cached_arrays(name: str, digest: str, compute, keep: int = 8) -> dict[str, np.ndarray]:
     """The arrays ``compute()`` returns (a dict of name to array), from the cache when an
-    entry ``name``-``digest`` is there and readable, else computed and stored."""
+    entry ``name``-``digest`` is there and readable, else computed and stored. A new entry
+    makes the entries of ``name`` beyond the ``keep`` most recently written go (``_pruned``):
+    each version of facesim, and each face, writes its own."""
     path = directory() / f"{name}-{digest}.npz"
     try:
         with np.load(path, allow_pickle=False) as stored:
@@ -48,7 +50,23 @@ def cached_arrays(name: str, digest: str, compute) -> dict[str, np.ndarray]:
         with open(partial, "wb") as handle:
             np.savez(handle, **arrays)
         os.replace(partial, path)
+        _pruned(name, keep)
     except OSError:  # read-only home, full disk: run without the cache
         with contextlib.suppress(OSError):  # no partial file, or no directory to hold one
             partial.unlink()
     return arrays
+
+
+def _pruned(name: str, keep: int) -> None:
+    """Remove the entries of ``name`` but the ``keep`` most recently written. Only facesim's
+    own entries (``name``-<40 hex digits>.npz) are touched; one another process removed first
+    is skipped."""
+    entries = []
+    for path in directory().glob(f"{name}-*.npz"):
+        digest = path.stem[len(name) + 1:]
+        if len(digest) == 40 and all(c in "0123456789abcdef" for c in digest):
+            with contextlib.suppress(OSError):
+                entries.append((path.stat().st_mtime_ns, path))
+    for _, path in sorted(entries, reverse=True)[keep:]:
+        with contextlib.suppress(OSError):
+            path.unlink()

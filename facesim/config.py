@@ -31,6 +31,20 @@ PACKAGE_DIR = Path(__file__).resolve().parent
 PROJECT_DIR = PACKAGE_DIR.parent
 
 
+def _code_digest() -> str:
+    """A hash of facesim's .py files and the package's name: what its compiled kernels and
+    its cached arrays (facesim.cache) are keyed by. The package's name too: a compiled
+    kernel names the module it was compiled in, and the same code imported under another
+    name (a vendored copy) cannot load it."""
+    digest = hashlib.sha1(__name__.rpartition(".")[0].encode() + b"\0")
+    for path in sorted(PACKAGE_DIR.glob("*.py")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
+
+
+CODE_DIGEST = _code_digest()
+
+
 def _key_numba_cache() -> None:
     """Keep facesim's compiled kernels in a directory named by a hash of facesim's code,
     wherever facesim is installed.
@@ -53,12 +67,7 @@ def _key_numba_cache() -> None:
 
     from .cache import directory
 
-    # the package's name too: a compiled kernel names the module it was compiled in, and
-    # the same code imported under another name (a vendored copy) cannot load it
-    digest = hashlib.sha1(__name__.rpartition(".")[0].encode() + b"\0")
-    for path in sorted(PACKAGE_DIR.glob("*.py")):
-        digest.update(path.name.encode() + b"\0" + path.read_bytes())
-    folder = f"numba-{digest.hexdigest()[:16]}"
+    folder = f"numba-{CODE_DIGEST[:16]}"
     provided = getattr(caching, "UserProvidedCacheLocator", None) or caching._UserProvidedCacheLocator
 
     class CodeKeyedLocator(provided):

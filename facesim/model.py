@@ -36,6 +36,8 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
+from .cache import cached_arrays, key
+from .config import CODE_DIGEST
 from .errors import InputError
 from .kernels import ModelArrays
 from .mesh import FaceMesh, csr_from_pairs
@@ -164,13 +166,23 @@ class Model:
     def preconditioner(self, h: float):
         """The implicit step's factorised preconditioner at step ``h`` for a skin with
         bending (facesim.solver.rest_preconditioner), factorised the first time a run asks
-        for it; empty (Jacobi, or the thesis's update) otherwise."""
-        from .solver import no_factor, rest_preconditioner
+        for it; empty (Jacobi, or the thesis's update) otherwise.
+
+        Kept on disk (facesim.cache), keyed by every array and constant of the model, the
+        step and facesim's code: a fresh `facesim render` of the head read it in a few ms
+        where factorising took 47 ms and loading the two kernels it runs (the force terms
+        and the system's entries, 1.3 MB of compiled code) 177 ms more (2026-12-03)."""
+        from .solver import Factor, no_factor, rest_preconditioner
 
         if not (self.arrays.implicit and self.arrays.bending > 0):
             return no_factor()
         if h not in self.factors:
-            self.factors[h] = rest_preconditioner(self, h)
+            parts = [CODE_DIGEST.encode(), np.float64(h).tobytes()]
+            for name, value in zip(self.arrays._fields, self.arrays):
+                value = np.asarray(value)
+                parts.append(f"{name} {value.dtype} {value.shape}".encode() + value.tobytes())
+            stored = cached_arrays("preconditioner", key(*parts), lambda: rest_preconditioner(self, h)._asdict(), keep=16)
+            self.factors[h] = Factor(**stored)
         return self.factors[h]
 
     @property

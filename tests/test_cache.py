@@ -89,3 +89,40 @@ def test_a_copy_of_the_same_code_elsewhere_loads_the_compiled_kernels(tmp_path):
     # the same code under another name compiles its own: a kernel names its module
     (copy / "facesim").rename(copy / "vendored")
     assert hits_and_misses(copy, "vendored") == (0, 1)
+
+
+def test_a_name_keeps_its_latest_entries_and_nothing_else_is_touched(tmp_path, monkeypatch):
+    """Each facesim version, and each face, writes entries of its own: a new one makes the
+    oldest of its name go, and never a file facesim did not write."""
+    monkeypatch.setenv("FACESIM_CACHE", str(tmp_path))
+    others = [tmp_path / "thing-notes.npz", tmp_path / f"other-{'0' * 40}.npz"]
+    for path in others:
+        path.write_bytes(b"kept")
+    digests = [cache.key(str(k).encode()) for k in range(5)]
+    for k, digest in enumerate(digests):
+        cache.cached_arrays("thing", digest, lambda: {"a": np.full(2, float(k))}, keep=3)
+        os.utime(tmp_path / f"thing-{digest}.npz", ns=(k * 10**9, k * 10**9))  # written a second apart
+    assert sorted(p.name for p in tmp_path.glob("thing-*.npz") if p not in others) == sorted(
+        f"thing-{d}.npz" for d in digests[2:])
+    assert all(path.read_bytes() == b"kept" for path in others)
+
+
+def test_the_heads_preconditioner_read_from_the_cache_is_the_factorised_one(tmp_path, monkeypatch):
+    """A fresh process reads the implicit step's factor (facesim.model.Model.preconditioner)
+    instead of factorising again: the same arrays; another step size, another entry."""
+    from facesim.config import HEAD, HEAD_MUSCLES
+    from facesim.model import Material
+    from facesim.simulate import _model
+
+    monkeypatch.setenv("FACESIM_CACHE", str(tmp_path))
+    model = _model(HEAD.resolve(), HEAD_MUSCLES.resolve(), Material())
+    h = 0.0371  # a step no other test factorises this model at in this process
+    computed = model.preconditioner(h)
+    assert len(list(tmp_path.glob("preconditioner-*.npz"))) == 1
+    model.factors.clear()
+    read = model.preconditioner(h)
+    assert read is not computed and computed.lower_block.size > 0
+    for a, b in zip(computed, read):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    model.preconditioner(h / 2)
+    assert len(list(tmp_path.glob("preconditioner-*.npz"))) == 2
