@@ -20,6 +20,7 @@ import functools
 import gc
 import os
 import sys
+import types
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -149,6 +150,31 @@ def use_backend(requested: str = "auto") -> str:
         f"no working GL backend ({'/'.join(candidates)}): install Debian's libosmesa6 "
         "(sudo apt-get install libosmesa6) or Mesa's EGL (libegl1 libegl-mesa0)"
     )
+
+
+def offscreen_pyrender():
+    """pyrender, imported without its on-screen viewer. pyrender's ``__init__`` imports the
+    viewer, and with it pyglet's windows and GL bindings: 150-180 ms of a fresh `facesim
+    render` (pyrender imported after trimesh 251-317 ms, without the viewer 96-157;
+    2026-12-03), for a window facesim never opens (``use_backend``). A stand-in takes the
+    viewer's module while pyrender is imported, and leaves ``sys.modules`` after it: an
+    ``import pyrender.viewer`` later in the process gets pyglet and the real viewer."""
+    if "pyrender" not in sys.modules and "pyrender.viewer" not in sys.modules:
+        stand_in = types.ModuleType("pyrender.viewer", "Not imported by facesim: import pyrender.viewer for the viewer.")
+
+        class Viewer:
+            def __init__(self, *args, **kwargs):
+                raise RenderError("pyrender was imported offscreen by facesim: use pyrender.viewer.Viewer")
+
+        stand_in.Viewer = Viewer
+        sys.modules["pyrender.viewer"] = stand_in
+        try:
+            import pyrender
+        finally:
+            del sys.modules["pyrender.viewer"]
+    import pyrender
+
+    return pyrender
 
 
 def _single_sample(renderer) -> None:
@@ -513,7 +539,7 @@ class FaceRenderer:
         face directory of that head, for the photo look and --onto."""
         settings = settings.for_face(None if figure is None else face)
         self.backend = use_backend(backend)
-        import pyrender
+        pyrender = offscreen_pyrender()
         import trimesh
 
         self.settings = settings

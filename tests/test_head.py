@@ -304,6 +304,31 @@ def test_closing_a_renderer_collects_no_garbage():
     renderer.close()  # a second close does nothing
 
 
+OFFSCREEN = """
+import sys
+import numpy as np
+from facesim.render import FaceRenderer, RenderSettings
+rest = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+with FaceRenderer(rest, np.array([[0, 1, 2]]), RenderSettings(32, 32)) as renderer:
+    drawn = renderer.render(rest).std() > 0
+windowed = "pyglet" in sys.modules
+import pyrender.viewer
+print(drawn, windowed, "pyglet" in sys.modules, pyrender.viewer.Viewer.__module__)
+"""
+
+
+def test_a_renderer_draws_without_importing_a_window_toolkit():
+    """pyrender imports its on-screen viewer and pyglet with it, 0.15 s of every fresh
+    `facesim render`: facesim draws without them, and a program that asks for the viewer
+    afterwards still gets it."""
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, "-c", OFFSCREEN], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == ["True", "False", "True", "pyrender.viewer"]
+
+
 def test_closing_one_renderer_leaves_another_drawing():
     """Every EGL renderer of a process shares one display, and pyrender terminated it when
     it deleted a renderer: closing one (`facesim sheet` nests a second face's renderer in
