@@ -912,7 +912,7 @@ def main() -> int:
     section("Compilation, measured apart", text + "\n\nEach row is one fresh process; `cache=True` keeps compiled "
             "kernels on disk, so only the first run of this code on a machine pays for compilation, whichever copy "
             "of facesim runs it (facesim.config).")
-    wall, walls, peak_mb = fresh_render_wall(1 if quick else 5, 64 if quick else 512)
+    wall, walls, peak_mb = fresh_render_wall(1 if quick else 9, 64 if quick else 512)
     section("`facesim render expressions/happy.yaml` in a fresh process, caches warm (the default head, 512² MP4)",
             f"median wall {wall:.2f} s over {len(walls)} runs: " + ", ".join(f"{w:.2f}" for w in walls) +
             f"; peak memory (maximum resident set) {peak_mb:.0f} MB")
