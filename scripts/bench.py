@@ -600,14 +600,43 @@ ANALYSIS = """### Where the targets stand: the missed ones and what would close 
 
 The per-step profile above (each kernel looped in compiled code, so no call overhead) names
 where a step's time goes. **The machine moves the figures more than the code does.** This
-run is on an AMD EPYC (Zen 4, 2 cores) whose memory manager keeps evicting the page
-cache (its `kdamond` thread): the same code gave, in two runs of this script 20 minutes
-apart this evening, the NumPy reference's step 61 and 38 ms, a fresh render 3.38 s and
-3.98 s (this run), 29.7 and 26.5 frames per second end to end, `prange` 1.42x and 1.60x
-(this run); a fresh render by hand between them took 3.4-8.2 s, and 2.93-3.29 s (median
-3.04) an hour before. On 2026-12-02 the runs were on an Intel Xeon. Changes are
-therefore measured side by side in one process (the old and the new code imported
-together, alternating runs), not across runs of this script.
+run is on an AMD EPYC (Zen 4, 2 cores) whose kernel runs DAMON (`kdamond`) with a scheme
+that pages out memory it finds cold, the page cache included, and samples every page's
+accessed bit twice a second. In this run the profile's terms took about twice what they
+took in this evening's runs (the springs 44.7 µs a step on the Hopper face against 16.7);
+two runs of this script tonight, 35 minutes apart with the same code but for the fresh
+render's changes, gave the Hopper face's happy 16.3 and 17.7 ms against 12.8 this evening,
+and `prange` 1.77x and 1.78x against 1.42x and 1.60x this evening. The fresh render's nine
+runs in this run spread 2.44-3.59 s; the same measurement run alone between the two
+took 2.62 s (median of five) and, a minute later, 3.05 s. On 2026-12-02 the runs were on
+an Intel Xeon. Changes are therefore measured side by side (the old and the new code
+alternating, in one process or in alternating fresh processes), not across runs of this
+script.
+
+- **Late evening (2026-12-03): a fresh `facesim render` 3.02 -> 2.63 s (medians of six
+  alternating fresh processes, the commit before against after).** Four changes to what
+  a fresh process does besides drawing, each measured:
+  - pyrender is imported without its on-screen viewer (facesim.render.offscreen_pyrender):
+    its `__init__` imports the viewer and with it pyglet's windows and GL bindings,
+    150-180 ms, for a window facesim never opens (pyrender imported after trimesh 251-317
+    ms, without the viewer 96-157). A stand-in module takes the viewer's place during the
+    import only; a later `import pyrender.viewer` gets the real one (tests/test_head.py).
+  - The implicit step's preconditioner is kept on disk (facesim.cache), keyed by every
+    array of the model, the step and facesim's code: factorising took 47 ms of a fresh
+    render and loading the two kernels it runs (the force terms and the system's entries,
+    1.3 MB of compiled code) 177 ms more. The cache keeps a name's latest entries only,
+    so versions and faces do not pile up (tests/test_cache.py).
+  - A renderer closes without the full garbage collection pyrender's delete ends with:
+    112-125 ms at the end of every render of the head.
+  - YAML is read by libyaml's safe loader: the head's muscle file 36.8 -> 5.2 ms.
+  Measured and left: Numba's first dispatch in a process (its typing set up, 0.35-0.6 s
+  with LLVM's), loading the solver's compiled kernels (60 ms), importing Numba (0.25-0.33
+  s), trimesh with SciPy's optimize module (0.45 s, imported by pyrender's mesh module),
+  the head's figure (72 ms, spread over many small steps), the GL context (73 ms) and
+  first shaders (149 ms), and 35 frames at 21-25 ms, during which both cores are busy
+  (1.65-1.71 cores: llvmpipe's rasteriser threads, its vertex work on the calling thread
+  and the next frame's preparation).
+
 
 - **This evening (2026-12-03): the head's preconditioner by blocks, an animation's frames
   drawn two in flight, the muscles' back-projection inlined.**
@@ -616,10 +645,11 @@ together, alternating runs), not across runs of this script.
     time and about four times a step. The vertices are now put in a minimum-degree order
     of their own graph with each vertex's three coordinates together, so that the factors
     are made of 3x3 blocks, and the solves run block by block: 55-70 µs (the profile's
-    "applied once" 54.5 µs in this run, 173.1 this afternoon), the same 180,000 entries.
+    "applied once" 54.5 µs in this evening's last run, 54.2 in this one, 173.1 this afternoon), the same 180,000 entries.
     Happy on the head 55 -> 31 ms side by side in one process, the positions the same to
-    4e-15 cm; 20.6 ms in this run against 36.1 in this afternoon's. Factorising takes a
-    few ms more, once per model (31 ms in this run). Tried and not kept: the solves entry
+    4e-15 cm; 20.6 ms in this evening's last run against 36.1 in this afternoon's.
+    Factorising takes a few ms more, once per model and step (31-49 ms; since tonight
+    read from facesim's cache instead). Tried and not kept: the solves entry
     by entry by rows instead of columns (310 µs), float32 values or int32 indices (no
     gain).
   - An animation's frames are drawn two in flight (`FaceRenderer.frames`, what `facesim
@@ -677,9 +707,9 @@ together, alternating runs), not across runs of this script.
   step's loops, which also write the links of K, stay scalar and read the positions where
   they are: a gathering pass of their own made them slower (springs 68 -> 84 ns a
   vertex), so they keep the old form (within this machine's noise of it).
-- **Simulation, 2 ms for happy on the Hopper face.** Not met: 12.8 ms by the thesis's
-  update in this run (12.0 in this evening's run before; 12.4, 13.8 and 18.0 this
-  afternoon), four steps a frame, 140 steps of 80-130 µs; the implicit solver takes
+- **Simulation, 2 ms for happy on the Hopper face.** Not met: 17.7 ms by the thesis's
+  update in this run (16.3 in tonight's run before, 12.8 and 12.0 in this evening's two;
+  12.4, 13.8 and 18.0 this afternoon), four steps a frame, 140 steps of 80-130 µs; the implicit solver takes
   one step a frame, but its step is the force terms, their links of K (a scalar loop of
   their own) and about eight conjugate-gradient iterations, each a product over the links
   about as costly as the springs and the repulsion together (the profile). 2 ms is 14 µs
@@ -687,7 +717,8 @@ together, alternating runs), not across runs of this script.
   alone costs written as the plainest serial loop (8.6 ns a spring, 2.8 springs a vertex,
   measured here). A step of the 468-vertex face also starts about 33 parallel regions
   (one per parallel loop, one per active muscle), 1.2 µs each on one thread here (a
-  one-line loop over 468 entries, against 0.06 µs compiled serially). They are not what
+  one-line loop over 468 entries, against 0.06 µs compiled serially; 0.78 µs with one
+  thread and 1.22 with two measured tonight, 0.04 serially). They are not what
   the step pays for: the muscles' region loops fused into one parallel loop for all the
   muscles (a step then starts some 19 fewer) measured the same side by side in one
   process, happy on the Hopper face 16.45 against 16.39 ms on one thread, on the head
@@ -698,9 +729,10 @@ together, alternating runs), not across runs of this script.
   preconditioner: the Hopper face's system at rest factorised (60,275 entries) made happy
   26.6 ms against Jacobi's 22.0 (2026-12-02), each iteration's two triangular solves
   costing more than the iterations they save.
-- **10 million vertex-steps per second per core at 28k vertices.** Not met: 3.45 million
-  in this run (290 ns per vertex-step at 27,614, the scaling table; 4.11 million in this
-  evening's run before, with the back-projection inlined; 3.7-3.9 million over three
+- **10 million vertex-steps per second per core at 28k vertices.** Not met: 3.41 million
+  in this run (293 ns per vertex-step at 27,614, the scaling table; 3.01 million in
+  tonight's run before; 3.45 and 4.11 million in this evening's two runs, with the
+  back-projection inlined; 3.7-3.9 million over three
   runs this afternoon), 2.9 million (348 ns) in this morning's with the same
   simulation code (2.7 million, 373 ns, before the vector
   lanes), 7.1-7.5 million on the Xeon on 2026-12-02 (134-141 ns). Profiled
@@ -721,7 +753,14 @@ together, alternating runs), not across runs of this script.
   not inlined), the back-projection without branches (93 ns against 69), the kernels
   compiled without `parallel` (195 ns against 141), Intel's SVML (llvmlite here is not
   built for it); earlier, each vertex gathering its springs from its one-ring (20 ns
-  against 13) and a reverse Cuthill-McKee order (within 3%). What would close it: the
+  against 13) and a reverse Cuthill-McKee order (within 3%; tonight 240 -> 216 ns in one
+  process, a random order 359: the subdivided meshes' own order is already local). **Not
+  memory alone:** where a mesh's arrays fit in the caches the step still costs 142-210 ns
+  at 6,990 vertices and 163-171 ns at 1,790 over this evening's four runs, 1.4 to 2 times
+  the 100 ns that 10 million a second allows; the springs and the edge repulsion together,
+  looped on one thread tonight, took 77 ns a vertex at 1,790 and 85 at 27,614, so a
+  gathering by blocks that kept their per-link rows in the first-level cache would save at
+  most that tenth. What would close it: the
   muscles are now the limit. The thesis's regions kept while the skin under them moves
   less than a tolerance (the fills), the pull's back-projection gathered by rows as the
   pairs' loop now is, the scatters to the vertices (scalar, about half of each link
@@ -730,9 +769,14 @@ together, alternating runs), not across runs of this script.
   27,614 vertices (one process, one thread, 2026-12-03; g within 1e-6 of float64's), the
   loop being bound by its memory, not its lanes, and the scalar scatters and fills
   around it would not change.
-- **`prange`, 2 threads against 1: 1.60x in this run at 27,614 (1.87x at 6,990, 1.54x at
-  109,758), 1.42x in this evening's run before; 1.49-1.74x over four runs of the
-  afternoon's simulation code on this machine, met in one of them; met on the Xeon (1.71x at 27,614 on 2026-12-02).** The springs, the edge repulsion, the
+- **`prange`, 2 threads against 1: met, 1.78x in this run at 27,614 (1.47x at 6,990,
+  1.74x at 109,758), 1.77x in tonight's run before; 1.60x and 1.42x in this evening's two
+  runs and 1.49-1.74x over four of the afternoon's, with the same step; met on the Xeon
+  (1.71x at 27,614 on 2026-12-02).** Alternating one thread and two in one process
+  tonight, the two-thread runs of the same work took 447-759 ms against 890-1,088 for one
+  (2.0-2.2x when the second core was free, 1.3-1.5x when not); with libgomp's threads
+  sleeping instead of spinning between loops (`OMP_WAIT_POLICY=passive`) 1.5x, pinned
+  to cores (`OMP_PROC_BIND`) no different. The springs, the edge repulsion, the
   bending, the muscles' flood fills (the muscles split by fixed slices,
   kernels._find_regions) and each muscle's region loop run on every core for a mesh of
   at least 4,000 vertices (facesim.config.PARALLEL_FROM), scattering by fixed slices into
@@ -761,8 +805,9 @@ together, alternating runs), not across runs of this script.
   everything again; facesim's own cache locator files them by a hash of the code and the
   package's name instead (facesim.config), and a copy elsewhere now loads them (a fresh
   render from a copy: 87 s -> 2.7 s; tests/test_cache.py).
-- **The head's frame against its floor, 1.2x: met, 1.01x at 256² and 1.06x at 512² in
-  this run (1.11x and 0.99x in this evening's run before; 1.25x and 1.20x this afternoon,
+- **The head's frame against its floor, 1.2x: met, 1.02x at 256² and 1.06x at 512² in
+  this run (1.02x and 1.07x in tonight's run before; 1.01x and 1.06x, 1.11x and 0.99x in
+  this evening's two; 1.25x and 1.20x this afternoon,
   1.13-1.37x at 512² over its three runs).** What closed it is what this paragraph named
   this afternoon as the way to close it: the next frame's skin, normals and vertex arrays
   computed while llvmpipe draws this one, and the drawn frame's edge filter moved there
@@ -773,10 +818,10 @@ together, alternating runs), not across runs of this script.
   and 1.6 ms between draws, the normals 0.4-0.7 ms, the nine parts' vertex arrays written
   in place 0.3 ms, the uploads 0.2 ms, the edge filter 1.3 ms, which the floor also does)
   now runs beside llvmpipe's vertex work instead of after it.
-- **25 frames per second end to end on the head at 512², antialiased: met, 26.5 in this
-  run (29.7 in this evening's run before; 32.3, 29.2 and 29.6 this afternoon; 20.5 this
-  morning), 34.8 on the Xeon (2026-12-02).** What made it here: the render changes
-  above (facesim's frame 25.4 ms in this run, the floor 24.1; the floor alone was 34-37
+- **25 frames per second end to end on the head at 512², antialiased: met, 31.8 in this
+  run (32.6 in tonight's run before; 26.5 and 29.7 in this evening's two; 32.3, 29.2 and
+  29.6 this afternoon; 20.5 this morning), 34.8 on the Xeon (2026-12-02).** What made it
+  here: the render changes above (facesim's frame 25.0 ms in this run, the floor 23.7; the floor alone was 34-37
   ms in this morning's run). Measured end to end in one process
   (2026-12-03): 35 frames in 1.05-1.31 s, of which the simulation 0.04 s, drawing 0.84-1.07 s
   with the encoder running beside it on the same two cores (x264 alone takes 0.2 s for
@@ -788,10 +833,13 @@ together, alternating runs), not across runs of this script.
   `--supersample` keeps the 4 samples), and the head's opaque parts culling their back
   faces (12-15% of a frame). Multisampling costs more in llvmpipe (108 ms at 512² with 2
   or 4 samples, measured on 2026-12-01).
-- **3 s for `facesim render` in a fresh process: missed, 3.98 s in this run (3.84-4.06
-  over its five runs), 3.38 s in this evening's run before (3.20-3.52); five by hand an
-  hour before them 2.93-3.29 s (median 3.04) with the same code, and 3.02, 3.06 and 3.58 s
-  in this afternoon's three runs, 2.64 s on the Xeon.** This evening's changes shorten two of its
+- **3 s for `facesim render` in a fresh process: met in this run, 2.95 s (nine runs,
+  2.44-3.59 s); 3.49 s (five runs, 3.16-3.63) in tonight's run before with the same code,
+  and 2.62 s, then 3.05 s, for the same five-run measurement alone between them. By hand
+  tonight 2.59-2.77 s. Before tonight's changes (late evening, above): 3.98 and 3.38 s in
+  this evening's two runs, 3.02, 3.06 and 3.58 s in this afternoon's three, 2.64 s on the
+  Xeon.** On this machine the target is met when the second core is free and missed when
+  it is not. This evening's changes shorten two of its
   parts, the head's simulation (the head's table) and its 35 frames (the frames in
   flight); the rest is unchanged, and this machine's evicted page cache makes the
   imports the most variable part (a first render after a pause took 8.2 s). Profiled here this afternoon
@@ -826,18 +874,20 @@ together, alternating runs), not across runs of this script.
   0.5 s), Numba's cached kernels loaded 0.6 s, the simulation 0.3 s, the writing 2.5 s.
   Taking SciPy's assignment solver out of the head's mirror map saved nothing, since
   trimesh imports the same modules (tried, reverted).
-- **50 ms for happy on the head: met, 20.6 ms in this run (19.6 in this evening's run
-  before; 36.1, 45.1 and 49.3 this afternoon, 38.1 this morning)** (38 ms on the Xeon),
-  since the preconditioner's solves by blocks (above); the head's table above, which
-  times the same run in a process of its own, gives 28.8 and 22.9 ms in this run
+- **50 ms for happy on the head: met, 27.2 ms in this run (22.1 in tonight's run before,
+  20.6 and 19.6 in this evening's two; 36.1, 45.1 and 49.3 this afternoon, 38.1 this
+  morning)** (38 ms on the Xeon), since the preconditioner's solves by blocks (above);
+  the head's table above, which times the same run in a process of its own, gives 22.6
+  and 28.1 ms in this run
   (51.6-54.2 in this morning's). That is this machine's noise between processes, not pyrender: the median of
   nine runs in six fresh processes was 42-58 ms, alike whether pyrender was imported
-  and a GL context made first or not (2026-12-03). On this machine the target is met in
-  some processes and missed in others. Side by side in
+  and a GL context made first or not (2026-12-03), before the preconditioner by blocks.
+  Side by side in
   one process (2026-12-01), the head's tied rim (issue 16) costs 7% over a pinned one.
-  The profile above now names the force terms (112 µs a step, the edge repulsion the
-  largest) and the conjugate gradients' products (46 µs each, three or four a step) as the
-  largest parts of a step, then the preconditioner (55 µs, four a step).
+  The profile above names the force terms (112 µs a step in this evening's last run, 213
+  in this one, the edge repulsion the largest) and the conjugate gradients' products (45
+  µs each, three or four a step) as the largest parts of a step, then the preconditioner
+  (54 µs, four a step).
 """
 
 
