@@ -602,13 +602,11 @@ The per-step profile above (each kernel looped in compiled code, so no call over
 where a step's time goes. **The machine moves the figures more than the code does.** This
 run is on an AMD EPYC (Zen 4, 2 cores) whose kernel runs DAMON (`kdamond`) with a scheme
 that pages out memory it finds cold, the page cache included, and samples every page's
-accessed bit twice a second. In this run the profile's terms took about twice what they
-took in this evening's runs (the springs 44.7 µs a step on the Hopper face against 16.7);
-two runs of this script tonight, 35 minutes apart with the same code but for the fresh
-render's changes, gave the Hopper face's happy 16.3 and 17.7 ms against 12.8 this evening,
-and `prange` 1.77x and 1.78x against 1.42x and 1.60x this evening. The fresh render's nine
-runs in this run spread 2.44-3.59 s; the same measurement run alone between the two
-took 2.62 s (median of five) and, a minute later, 3.05 s. On 2026-12-02 the runs were on
+accessed bit twice a second. Tonight's three runs of this script, within an hour and with
+the same simulation code, gave the Hopper face's happy 16.3, 17.7 and 11.8 ms (this run),
+the profile's springs 44.7 µs a step in the second and 21.8 in this one, and the fresh
+render 3.49, 2.95 and 2.47 s (this run); the same fresh-render measurement run alone
+between the first two took 2.62 s (median of five) and, a minute later, 3.05 s. On 2026-12-02 the runs were on
 an Intel Xeon. Changes are therefore measured side by side (the old and the new code
 alternating, in one process or in alternating fresh processes), not across runs of this
 script.
@@ -645,10 +643,10 @@ script.
     time and about four times a step. The vertices are now put in a minimum-degree order
     of their own graph with each vertex's three coordinates together, so that the factors
     are made of 3x3 blocks, and the solves run block by block: 55-70 µs (the profile's
-    "applied once" 54.5 µs in this evening's last run, 54.2 in this one, 173.1 this afternoon), the same 180,000 entries.
+    "applied once" 54.0 µs in this run, 173.1 this afternoon), the same 180,000 entries.
     Happy on the head 55 -> 31 ms side by side in one process, the positions the same to
     4e-15 cm; 20.6 ms in this evening's last run against 36.1 in this afternoon's.
-    Factorising takes a few ms more, once per model and step (31-49 ms; since tonight
+    Factorising takes a few ms more, once per model and step (31-56 ms; since tonight
     read from facesim's cache instead). Tried and not kept: the solves entry
     by entry by rows instead of columns (310 µs), float32 values or int32 indices (no
     gain).
@@ -707,9 +705,9 @@ script.
   step's loops, which also write the links of K, stay scalar and read the positions where
   they are: a gathering pass of their own made them slower (springs 68 -> 84 ns a
   vertex), so they keep the old form (within this machine's noise of it).
-- **Simulation, 2 ms for happy on the Hopper face.** Not met: 17.7 ms by the thesis's
-  update in this run (16.3 in tonight's run before, 12.8 and 12.0 in this evening's two;
-  12.4, 13.8 and 18.0 this afternoon), four steps a frame, 140 steps of 80-130 µs; the implicit solver takes
+- **Simulation, 2 ms for happy on the Hopper face.** Not met: 11.8 ms by the thesis's
+  update in this run (16.3 and 17.7 in tonight's two runs before it, in a slow hour; 12.8
+  and 12.0 in this evening's two; 12.4, 13.8 and 18.0 this afternoon), four steps a frame, 140 steps of 80-130 µs; the implicit solver takes
   one step a frame, but its step is the force terms, their links of K (a scalar loop of
   their own) and about eight conjugate-gradient iterations, each a product over the links
   about as costly as the springs and the repulsion together (the profile). 2 ms is 14 µs
@@ -729,10 +727,10 @@ script.
   preconditioner: the Hopper face's system at rest factorised (60,275 entries) made happy
   26.6 ms against Jacobi's 22.0 (2026-12-02), each iteration's two triangular solves
   costing more than the iterations they save.
-- **10 million vertex-steps per second per core at 28k vertices.** Not met: 3.41 million
-  in this run (293 ns per vertex-step at 27,614, the scaling table; 3.01 million in
-  tonight's run before; 3.45 and 4.11 million in this evening's two runs, with the
-  back-projection inlined; 3.7-3.9 million over three
+- **10 million vertex-steps per second per core at 28k vertices.** Not met: 4.55 million
+  in this run (220 ns per vertex-step at 27,614, the scaling table; 3.01 and 3.41 million
+  in tonight's two runs before it, in a slow hour; 3.45 and 4.11 million in this
+  evening's two runs, with the back-projection inlined; 3.7-3.9 million over three
   runs this afternoon), 2.9 million (348 ns) in this morning's with the same
   simulation code (2.7 million, 373 ns, before the vector
   lanes), 7.1-7.5 million on the Xeon on 2026-12-02 (134-141 ns). Profiled
@@ -755,9 +753,9 @@ script.
   built for it); earlier, each vertex gathering its springs from its one-ring (20 ns
   against 13) and a reverse Cuthill-McKee order (within 3%; tonight 240 -> 216 ns in one
   process, a random order 359: the subdivided meshes' own order is already local). **Not
-  memory alone:** where a mesh's arrays fit in the caches the step still costs 142-210 ns
-  at 6,990 vertices and 163-171 ns at 1,790 over this evening's four runs, 1.4 to 2 times
-  the 100 ns that 10 million a second allows; the springs and the edge repulsion together,
+  memory alone:** where a mesh's arrays fit in the caches the step still costs 128-210 ns
+  at 6,990 vertices and 138-171 ns at 1,790 over this evening's five runs (128 and 138 in
+  this one), 1.3 to 2 times the 100 ns that 10 million a second allows; the springs and the edge repulsion together,
   looped on one thread tonight, took 77 ns a vertex at 1,790 and 85 at 27,614, so a
   gathering by blocks that kept their per-link rows in the first-level cache would save at
   most that tenth. Every index of the model in int32 instead of int64, side by side in
@@ -772,9 +770,9 @@ script.
   27,614 vertices (one process, one thread, 2026-12-03; g within 1e-6 of float64's), the
   loop being bound by its memory, not its lanes, and the scalar scatters and fills
   around it would not change.
-- **`prange`, 2 threads against 1: met, 1.78x in this run at 27,614 (1.47x at 6,990,
-  1.74x at 109,758), 1.77x in tonight's run before; 1.60x and 1.42x in this evening's two
-  runs and 1.49-1.74x over four of the afternoon's, with the same step; met on the Xeon
+- **`prange`, 2 threads against 1: met, 1.84x in this run at 27,614 (1.54x at 6,990,
+  1.91x at 109,758), 1.77x and 1.78x in tonight's two runs before; 1.60x and 1.42x in this
+  evening's two runs and 1.49-1.74x over four of the afternoon's, with the same step; met on the Xeon
   (1.71x at 27,614 on 2026-12-02).** Alternating one thread and two in one process
   tonight, the two-thread runs of the same work took 447-759 ms against 890-1,088 for one
   (2.0-2.2x when the second core was free, 1.3-1.5x when not); with libgomp's threads
@@ -808,9 +806,9 @@ script.
   everything again; facesim's own cache locator files them by a hash of the code and the
   package's name instead (facesim.config), and a copy elsewhere now loads them (a fresh
   render from a copy: 87 s -> 2.7 s; tests/test_cache.py).
-- **The head's frame against its floor, 1.2x: met, 1.02x at 256² and 1.06x at 512² in
-  this run (1.02x and 1.07x in tonight's run before; 1.01x and 1.06x, 1.11x and 0.99x in
-  this evening's two; 1.25x and 1.20x this afternoon,
+- **The head's frame against its floor, 1.2x: met, 0.93x at 256² and 1.04x at 512² in
+  this run (1.02x and 1.07x, 1.02x and 1.06x in tonight's two before; 1.01x and 1.06x,
+  1.11x and 0.99x in this evening's two; 1.25x and 1.20x this afternoon,
   1.13-1.37x at 512² over its three runs).** What closed it is what this paragraph named
   this afternoon as the way to close it: the next frame's skin, normals and vertex arrays
   computed while llvmpipe draws this one, and the drawn frame's edge filter moved there
@@ -821,10 +819,10 @@ script.
   and 1.6 ms between draws, the normals 0.4-0.7 ms, the nine parts' vertex arrays written
   in place 0.3 ms, the uploads 0.2 ms, the edge filter 1.3 ms, which the floor also does)
   now runs beside llvmpipe's vertex work instead of after it.
-- **25 frames per second end to end on the head at 512², antialiased: met, 31.8 in this
-  run (32.6 in tonight's run before; 26.5 and 29.7 in this evening's two; 32.3, 29.2 and
+- **25 frames per second end to end on the head at 512², antialiased: met, 39.8 in this
+  run (32.6 and 31.8 in tonight's two before; 26.5 and 29.7 in this evening's two; 32.3, 29.2 and
   29.6 this afternoon; 20.5 this morning), 34.8 on the Xeon (2026-12-02).** What made it
-  here: the render changes above (facesim's frame 25.0 ms in this run, the floor 23.7; the floor alone was 34-37
+  here: the render changes above (facesim's frame 22.9 ms in this run, the floor 22.2; the floor alone was 34-37
   ms in this morning's run). Measured end to end in one process
   (2026-12-03): 35 frames in 1.05-1.31 s, of which the simulation 0.04 s, drawing 0.84-1.07 s
   with the encoder running beside it on the same two cores (x264 alone takes 0.2 s for
@@ -836,10 +834,10 @@ script.
   `--supersample` keeps the 4 samples), and the head's opaque parts culling their back
   faces (12-15% of a frame). Multisampling costs more in llvmpipe (108 ms at 512² with 2
   or 4 samples, measured on 2026-12-01).
-- **3 s for `facesim render` in a fresh process: met in this run, 2.95 s (nine runs,
-  2.44-3.59 s); 3.49 s (five runs, 3.16-3.63) in tonight's run before with the same code,
-  and 2.62 s, then 3.05 s, for the same five-run measurement alone between them. By hand
-  tonight 2.59-2.77 s. Before tonight's changes (late evening, above): 3.98 and 3.38 s in
+- **3 s for `facesim render` in a fresh process: met, 2.47 s in this run (nine runs,
+  2.25-2.74 s); 3.49 s (five runs, 3.16-3.63) and 2.95 s (nine runs, 2.44-3.59) in
+  tonight's two runs before it, in a slow hour, with the same code, and 2.62 s, then 3.05
+  s, for the same five-run measurement alone between them. By hand tonight 2.59-2.77 s. Before tonight's changes (late evening, above): 3.98 and 3.38 s in
   this evening's two runs, 3.02, 3.06 and 3.58 s in this afternoon's three, 2.64 s on the
   Xeon.** On this machine the target is met when the second core is free and missed when
   it is not. This evening's changes shorten two of its
@@ -877,19 +875,19 @@ script.
   0.5 s), Numba's cached kernels loaded 0.6 s, the simulation 0.3 s, the writing 2.5 s.
   Taking SciPy's assignment solver out of the head's mirror map saved nothing, since
   trimesh imports the same modules (tried, reverted).
-- **50 ms for happy on the head: met, 27.2 ms in this run (22.1 in tonight's run before,
-  20.6 and 19.6 in this evening's two; 36.1, 45.1 and 49.3 this afternoon, 38.1 this
+- **50 ms for happy on the head: met, 19.4 ms in this run (22.1 and 27.2 in tonight's two
+  before, 20.6 and 19.6 in this evening's two; 36.1, 45.1 and 49.3 this afternoon, 38.1 this
   morning)** (38 ms on the Xeon), since the preconditioner's solves by blocks (above);
-  the head's table above, which times the same run in a process of its own, gives 22.6
-  and 28.1 ms in this run
+  the head's table above, which times the same run in a process of its own, gives 19.9
+  and 22.5 ms in this run
   (51.6-54.2 in this morning's). That is this machine's noise between processes, not pyrender: the median of
   nine runs in six fresh processes was 42-58 ms, alike whether pyrender was imported
   and a GL context made first or not (2026-12-03), before the preconditioner by blocks.
   Side by side in
   one process (2026-12-01), the head's tied rim (issue 16) costs 7% over a pinned one.
-  The profile above names the force terms (112 µs a step in this evening's last run, 213
-  in this one, the edge repulsion the largest) and the conjugate gradients' products (45
-  µs each, three or four a step) as the largest parts of a step, then the preconditioner
+  The profile above names the force terms (117 µs a step in this run, 213 in tonight's
+  slow one, the edge repulsion the largest) and the conjugate gradients' products (46 µs
+  each, three or four a step) as the largest parts of a step, then the preconditioner
   (54 µs, four a step).
 """
 
