@@ -17,11 +17,11 @@ def muscle_regions(model) -> list[np.ndarray]:
 
     work = kernels.workspace(model.arrays)
     rest = kernels.control(model.arrays, np.zeros(len(model.muscles.names)))
-    kernels._muscle_frame(model.arrays, model.rest_position, work.frame)
+    kernels._muscle_frame(model.arrays, model.arrays.rest_position, work.frame)
     regions = []
     for m in range(model.muscle_count):
         count = kernels._region_of_influence(model.arrays, m, rest.origin, rest.insertion_point, work.frame, work)
-        regions.append(work.region[:count].copy())
+        regions.append(np.array(model.mesh_vertex(work.region[:count])))
     return regions
 
 

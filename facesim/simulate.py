@@ -152,7 +152,7 @@ def run(
     if activations.ndim != 2 or activations.shape[1] != len(model.muscles.names):
         raise ValueError(f"activations must be (frames, {len(model.muscles.names)}), one column per muscle and control")
     n = model.vertex_count
-    state = kernels.State(model.rest_position.copy(), np.zeros((n, 3)))
+    state = kernels.State(np.array(model.arrays.rest_position), np.zeros((n, 3)))  # the kernels' vertex order (Model)
     out = solver.Diagnostics(np.empty((frames, n, 3)), np.zeros(frames), np.zeros(frames, dtype=np.int64), np.zeros(frames))
     frame_speed = RUNAWAY_FRACTION * model.scale / dt
     energy_limit = 0.5 * model.material.mass * n * frame_speed**2
@@ -178,12 +178,14 @@ def run(
         numba.set_num_threads(previous)
     positions, energy, inverted, smallest = out
     if status == kernels.NOT_FINITE:
-        raise SimulationError(f"{source}: simulation diverged at frame {frame}: vertex {element} is not finite", frame)
+        raise SimulationError(f"{source}: simulation diverged at frame {frame}: vertex {model.mesh_vertex(element)} is not "
+                              "finite", frame)
     if status == kernels.INVERTED:
-        raise SimulationError(f"{source}: simulation failed at frame {frame}: triangle {element} inverted", frame)
+        raise SimulationError(f"{source}: simulation failed at frame {frame}: triangle {model.mesh_triangle(element)} inverted",
+                              frame)
     if status == kernels.RUNAWAY:
         raise SimulationError(f"{source}: simulation diverged at frame {frame}: runaway kinetic energy {energy[frame]:.3g}", frame)
-    return positions, energy, inverted, smallest
+    return model.in_mesh_order(positions, axis=1), energy, inverted, smallest
 
 
 def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None) -> Animation:
@@ -222,8 +224,8 @@ def muscle_forces(model: Model, positions: np.ndarray, activation: np.ndarray) -
     ``activation`` (one row of the activation table: muscles, then jaw and eyelids), with
     the muscles' ends where the jaw and lids hold them, as in the step: what
     ``--show-muscles`` draws, as the thesis's figure 3.10."""
-    x = np.ascontiguousarray(positions, dtype=np.float64)
+    x = np.ascontiguousarray(model.in_kernel_order(positions), dtype=np.float64)
     forces = kernels.forces(model.arrays)
     control = kernels.control(model.arrays, activation)
     kernels._muscle_forces(model.arrays, x, control, kernels.workspace(model.arrays), forces)
-    return forces.force
+    return model.in_mesh_order(forces.force)

@@ -361,6 +361,40 @@ def scaling(levels: int, repeats: int, plot: Path | None) -> tuple[str, dict]:
                  rows), figures
 
 
+def vertex_orders(level: int, repeats: int) -> tuple[str, dict]:
+    """Happy on the Hopper face Loop-subdivided ``level`` times, one thread, in the mesh's own
+    vertex order and in facesim's cache order (facesim.model.reordered), and the same for
+    the mesh with its vertices shuffled (as an exported or scanned mesh may number them):
+    the four models alternating, each the median of its runs."""
+    from facesim.mesh import FaceMesh
+
+    base = load_mesh(HOPPER_MESH)
+    carried = muscles_as_points(load_model(HOPPER_MUSCLES, MuscleFile), base)
+    spec = thesis_spec("happy")
+    mesh = subdivide(base, level)
+    shuffle = np.random.default_rng(1).permutation(mesh.vertex_count)
+    place = np.empty_like(shuffle)
+    place[shuffle] = np.arange(len(shuffle))
+    meshes = {"the subdivided mesh's own": mesh, "shuffled": FaceMesh(mesh.vertices[shuffle], place[mesh.faces])}
+    models = {(label, reorder): build_model(m, resolve_muscles(carried, m, label), spec.material, reorder=reorder)
+              for label, m in meshes.items() for reorder in (False, True)}
+    first = next(iter(models.values()))
+    frames = max(4, round(35 * 4 / first.material.substeps))
+    table_ = activation_table(spec.with_overrides(frames=frames), first.muscles)
+    times = {key: [] for key in models}
+    for model in models.values():
+        run(model, table_[:2], spec.dt, stop_on_inversion=False)
+    for _ in range(repeats):
+        for key, model in models.items():
+            times[key] += timed(lambda: run(model, table_, spec.dt, stop_on_inversion=False, threads=1), 1)
+    steps = len(table_) * first.material.substeps * first.vertex_count
+    per = {key: median(t) / steps for key, t in times.items()}
+    rows = [[label, f"{per[(label, False)] * 1e9:.0f}", f"{per[(label, True)] * 1e9:.0f}",
+             f"{per[(label, False)] / per[(label, True)]:.2f}x"] for label in meshes]
+    return table([f"happy, {first.vertex_count:,} vertices, one thread: vertex order", "as numbered, ns per vertex-step",
+                  "facesim's cache order, ns per vertex-step", "speed-up"], rows), per
+
+
 # --- rendering -------------------------------------------------------------------------
 
 RENDER_FLOOR_CODE = """
@@ -972,6 +1006,12 @@ def main() -> int:
             "\n\nA finer mesh of the same face takes more sub-steps per frame (its lighter vertices oscillate "
             "faster: `facesim.model`); each row simulates about as many steps as the default face's 35 frames." +
             ("" if quick else "\n\n![cost per vertex-step](docs/scaling.png)"))
+    text, order_figures = vertex_orders(1 if quick else 3, repeats)
+    section("Vertex order", text + "\n\nA mesh of at least 4,000 vertices is simulated in an order of its own "
+            "(facesim.model.reordered): reverse Cuthill-McKee on its edge graph (scipy.sparse.csgraph), the springs, "
+            "triangles and hinges sorted by their first vertex in it; what a user sees (positions, NPZ, messages) "
+            "stays in the mesh's numbering. The four models alternate, each the median of "
+            f"{repeats} runs; the scaling table above is in facesim's order.")
     text, render_figures = rendering([64] if quick else [256, 512, 1024], 1 if quick else 3, 12 if quick else 70)
     section("Rendering: facesim against the bare pyrender floor", text + "\n\nThe floor renders the same scene "
             "with the same renderer and settings, antialiased the same way (the edge filter), and updates nothing; "
@@ -1014,6 +1054,7 @@ def main() -> int:
     ]
     figures = dict(table_31=f31, solvers=solver_figures, profile=profile_figures, numba_ratio=ratio, compile=compile_figures, fresh_wall=wall,
                    fresh_peak_mb=peak_mb, scaling={str(k): v for k, v in scale.items()},
+                   vertex_order={f"{label}, {'reordered' if reorder else 'as numbered'}": v for (label, reorder), v in order_figures.items()},
                    render={f"{key[0]}-{key[1]}": v for key, v in render_figures.items() if key != "processes"},
                    head={str(k): v for k, v in head_figures.items()})
     if args.json:
