@@ -152,9 +152,12 @@ def render(
         settings = replace(settings, width=width, height=height)
     output = output or Path("out") / f"{loaded.title}.mp4"
     check_output(output, force, settings)
-    animation = simulate(loaded, notice=notice)
-    with progress_bar(animation.frames, f"rendering {loaded.title}") as advance:
-        report = write_animation(animation, output, settings, fps, backend, jobs, advance, replace=force)
+    animation = simulate(loaded, notice=notice, background=True)  # drawn and encoded as its frames come
+    try:
+        with progress_bar(animation.frames, f"rendering {loaded.title}") as advance:
+            report = write_animation(animation, output, settings, fps, backend, jobs, advance, replace=force)
+    finally:
+        animation.cancel()  # after a failed render, the simulation stops too
     compiled = " (the first run compiles the Numba kernels; later runs load them from cache)" if report.simulation_seconds > 3 else ""
     typer.echo(f"wrote {output}: {report.frames} frames, simulation {report.simulation_seconds * 1000:.1f} ms, "
                f"render {report.render_seconds:.2f} s{compiled}", err=True)

@@ -118,8 +118,10 @@ def iter_frames(animation: Animation, settings: RenderSettings, backend: str = "
     processes (started with spawn: an OpenGL context must not be forked), each with its
     own renderer. ``renderer`` lets a caller reuse one across animations of one mesh.
     """
-    arrows = arrows_for(animation) if settings.show_muscles else None
     frames = animation.frames
+    if settings.show_muscles or not (jobs <= 1 or frames < 2 * jobs):
+        animation.ready()  # the arrows, and the processes' chunks, take every frame at once
+    arrows = arrows_for(animation) if settings.show_muscles else None
     if jobs <= 1 or frames < 2 * jobs:
         own = renderer is None
         renderer = renderer or FaceRenderer.of(animation, settings, backend)
@@ -233,11 +235,11 @@ def write_animation(animation: Animation, path: Path, settings: RenderSettings, 
     kind = output_kind(path)
     start = time.perf_counter()
     if kind == "npz":
-        write_npz(animation, path, replace)
+        write_npz(animation.ready(), path, replace)
     else:
         frames = iter_frames(animation, settings, backend, jobs, progress, renderer)
         write_frames(frames, path, kind, fps or animation.fps, replace, count=animation.frames)
-    return RenderReport(animation.name, path, len(animation.active_muscles), animation.frames, animation.seconds,
+    return RenderReport(animation.name, path, len(animation.active_muscles), animation.frames, animation.simulation_seconds,
                         time.perf_counter() - start)
 
 

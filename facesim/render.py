@@ -753,11 +753,13 @@ class FaceRenderer:
         The head's 35 frames of happy, side by side in one process (2026-12-03): 16.9 ->
         13.1 ms a frame at 256², 21.1 -> 18.5 at 512²; the mask at 256² 4.2 -> 3.3.
         ``arrows`` (frames, n, 3) as ``render``'s, frame by frame; ``pose`` (5,), one for
-        every frame instead of the animation's (as ``frame``'s)."""
+        every frame instead of the animation's (as ``frame``'s). An animation simulated in
+        the background is drawn as its frames come (``Animation.ready``)."""
         if animation.frames == 0:
             return
 
-        def prepare(k):  # into slot k mod 2
+        def prepare(k):  # into slot k mod 2, once the frame is simulated (facesim.simulate: in the background)
+            animation.ready(k)
             return self._prepared_frame(animation, k, None if arrows is None else arrows[k], pose, k % 2)
 
         with ThreadPoolExecutor(1, thread_name_prefix="facesim-frames") as pool:

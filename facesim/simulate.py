@@ -4,10 +4,17 @@
 mesh, muscles and material, turns the spec into a (frames, muscles) activation table,
 runs ``solver._simulate`` and wraps the result in an :class:`Animation`. A simulation
 that blows up raises :class:`SimulationError` naming the frame and the vertex or triangle.
+
+``simulate(spec, background=True)`` returns the Animation at once and simulates on a
+thread of its own (the kernels release the GIL), frame by frame into its arrays, so
+that ``facesim render`` draws and encodes the first frames while the later ones are
+simulated; ``Animation.ready(f)`` waits for frame f, and raises the simulation's error
+for a frame it did not reach.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -28,6 +35,9 @@ from .spec import Spec, activation_table, pose_table
 #: Vertex-steps per call of the simulation kernel (about 0.2 s): a long run returns to
 #: Python between calls, where Ctrl-C and SIGTERM are handled.
 STEPS_PER_CALL = 1_000_000
+#: Frames per call of the simulation kernel when it runs in the background: a frame is
+#: handed to the renderer as soon as it is simulated.
+STREAMED_FRAMES = 1
 #: A run expected to take longer than this (s) is announced before it starts.
 LONG_RUN = 120.0
 #: Vertex-steps per second assumed for that estimate (BENCHMARKS.md: 2-4 million).
@@ -36,6 +46,37 @@ STEP_RATE = 2e6
 #: A run is "runaway" when its kinetic energy exceeds that of every vertex crossing a
 #: tenth of the face in one frame: far beyond any expression, short of overflow.
 RUNAWAY_FRACTION = 0.1
+
+
+class Progress:
+    """How far a simulation running in the background has come (``simulate``): the frames
+    done, the seconds spent so far, the error that stopped it; ``cancelled`` asks it to
+    stop after the frame it is on."""
+
+    def __init__(self):
+        self._condition = threading.Condition()
+        self.done = 0
+        self.seconds = 0.0
+        self.error: BaseException | None = None
+        self.cancelled = False
+
+    def advance(self, done: int, seconds: float) -> None:
+        with self._condition:
+            self.done, self.seconds = done, seconds
+            self._condition.notify_all()
+
+    def fail(self, error: BaseException) -> None:
+        with self._condition:
+            self.error = error
+            self._condition.notify_all()
+
+    def wait(self, frame: int) -> None:
+        """Return once frame ``frame`` is simulated; raise the error that stopped the
+        simulation before it."""
+        with self._condition:
+            self._condition.wait_for(lambda: self.done > frame or self.error is not None)
+            if self.done <= frame:
+                raise self.error
 
 
 @dataclass(frozen=True)
@@ -47,7 +88,8 @@ class Animation:
     degrees (facesim.spec.POSE), applied at render time; kinetic_energy, smallest_area :
     (frames,) float; inverted : (frames,) int (triangles turned over and folded against
     the skin around them, ``kernels._triangle_checks``); face : the face directory
-    (facesim.own_face.FaceDirectory) whose head this is, if any: its texture and camera.
+    (facesim.own_face.FaceDirectory) whose head this is, if any: its texture and camera;
+    progress : set while it is simulated in the background (``ready``).
     """
 
     name: str
@@ -65,6 +107,25 @@ class Animation:
     model: Model | None = field(default=None, repr=False, compare=False)
     pose: np.ndarray | None = None
     face: object = None
+    progress: Progress | None = field(default=None, repr=False, compare=False)
+
+    def ready(self, frame: int | None = None) -> "Animation":
+        """Wait until ``frame`` (by default the last) is simulated, when the animation is
+        simulated in the background; raises the simulation's error (SimulationError) for
+        a frame it did not reach."""
+        if self.progress is not None:
+            self.progress.wait(self.frames - 1 if frame is None else frame)
+        return self
+
+    def cancel(self) -> None:
+        """Stop a background simulation after the frame it is on (a failed render)."""
+        if self.progress is not None:
+            self.progress.cancelled = True
+
+    @property
+    def simulation_seconds(self) -> float:
+        """Seconds spent simulating (so far, in the background)."""
+        return self.seconds if self.progress is None else self.progress.seconds
 
     def pose_at(self, frame: int) -> np.ndarray | None:
         return None if self.pose is None else self.pose[frame]
@@ -143,36 +204,48 @@ def run(
     stop_on_inversion: bool = True,
     source: str = "simulation",
     threads: int | None = None,
+    out: solver.Diagnostics | None = None,
+    progress: Progress | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Simulate ``activations`` (frames, M) from rest. Returns positions, kinetic energy,
-    inverted-triangle counts and smallest relative areas per frame. The kernels' parallel
-    loops run on ``threads`` threads: by default every core Numba has for a mesh of at
-    least ``PARALLEL_FROM`` vertices, else one (facesim.config)."""
+    inverted-triangle counts and smallest relative areas per frame: ``out``'s arrays if
+    given (``diagnostics``). The kernels' parallel loops run on ``threads`` threads: by
+    default every core Numba has for a mesh of at least ``PARALLEL_FROM`` vertices, else
+    one (facesim.config). With ``progress``, ``STREAMED_FRAMES`` frames a call, each
+    reported done as soon as it is in ``out``, and the run stops early when cancelled."""
     frames = len(activations)
     if activations.ndim != 2 or activations.shape[1] != len(model.muscles.names):
         raise ValueError(f"activations must be (frames, {len(model.muscles.names)}), one column per muscle and control")
     n = model.vertex_count
     state = kernels.State(np.array(model.arrays.rest_position), np.zeros((n, 3)))  # the kernels' vertex order (Model)
-    out = solver.Diagnostics(np.empty((frames, n, 3)), np.zeros(frames), np.zeros(frames, dtype=np.int64), np.zeros(frames))
+    out = diagnostics(frames, n) if out is None else out
+    kernel_out = out if model.vertex_order is None else out._replace(positions=np.empty_like(out.positions))
     frame_speed = RUNAWAY_FRACTION * model.scale / dt
     energy_limit = 0.5 * model.material.mass * n * frame_speed**2
     table = np.ascontiguousarray(activations, dtype=np.float64)
     control = kernels.control(model.arrays, np.zeros(table.shape[1]))
     work, forces = kernels.workspace(model.arrays), kernels.forces(model.arrays)
     factor = model.preconditioner(float(dt) / model.material.substeps)
-    piece = max(1, int(STEPS_PER_CALL / (model.material.substeps * n)))
+    piece = STREAMED_FRAMES if progress else max(1, int(STEPS_PER_CALL / (model.material.substeps * n)))
     status, frame, element = kernels.OK, -1, -1
+    started = time.perf_counter()
     if threads is None:
         threads = numba.config.NUMBA_NUM_THREADS if n >= PARALLEL_FROM else 1
     previous = numba.get_num_threads()
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     try:
         for start in range(0, frames, piece):  # Python between pieces: Ctrl-C and SIGTERM act within about 0.2 s
+            stop = min(frames, start + piece)
             status, frame, element = solver._simulate(
-                model.arrays, table, start, min(frames, start + piece), float(dt), int(model.material.substeps),
-                energy_limit, stop_on_inversion, state, control, work, forces, factor, out,
+                model.arrays, table, start, stop, float(dt), int(model.material.substeps),
+                energy_limit, stop_on_inversion, state, control, work, forces, factor, kernel_out,
             )
-            if status != kernels.OK:
+            done = stop if status == kernels.OK else frame
+            if kernel_out is not out:  # into the mesh's vertex order
+                out.positions[start:done] = model.in_mesh_order(kernel_out.positions[start:done], axis=1)
+            if progress:
+                progress.advance(done, time.perf_counter() - started)
+            if status != kernels.OK or (progress and progress.cancelled):
                 break
     finally:
         numba.set_num_threads(previous)
@@ -185,21 +258,45 @@ def run(
                               frame)
     if status == kernels.RUNAWAY:
         raise SimulationError(f"{source}: simulation diverged at frame {frame}: runaway kinetic energy {energy[frame]:.3g}", frame)
-    return model.in_mesh_order(positions, axis=1), energy, inverted, smallest
+    return positions, energy, inverted, smallest
 
 
-def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None) -> Animation:
+def diagnostics(frames: int, n: int) -> solver.Diagnostics:
+    """Room for a run's output (``run``): positions, kinetic energy, inverted triangles and
+    smallest relative area per frame."""
+    return solver.Diagnostics(np.empty((frames, n, 3)), np.zeros(frames), np.zeros(frames, dtype=np.int64), np.zeros(frames))
+
+
+def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background: bool = False) -> Animation:
     """Simulate an expression spec from the neutral face. ``notice`` receives a one-line
-    estimate before a run expected to take minutes."""
+    estimate before a run expected to take minutes. ``background``: return at once and
+    simulate on a thread of its own (module docstring); the spec, mesh and muscles are
+    checked before it starts either way."""
     model = model_for(spec)
     table = activation_table(spec, model.muscles)
     expected = len(table) * model.material.substeps * model.vertex_count / STEP_RATE
     if notice and expected > LONG_RUN:
         notice(f"{spec.source}: {len(table)} frames x {model.material.substeps} sub-steps x {model.vertex_count:,} "
                f"vertices: about {expected / 60:.0f} minutes of simulation (Ctrl-C stops it)")
+    out = diagnostics(len(table), model.vertex_count)
+    progress = Progress() if background else None
+
+    def simulated():
+        run(model, table, spec.dt, stop_on_inversion, spec.source, out=out, progress=progress)
+
+    def in_background():
+        try:
+            simulated()
+        except BaseException as error:  # for Animation.ready to raise where the frames are wanted
+            progress.fail(error)
+
     start = time.perf_counter()
-    positions, energy, inverted, smallest = run(model, table, spec.dt, stop_on_inversion, spec.source)
+    if background:
+        threading.Thread(target=in_background, name="facesim-simulation", daemon=True).start()
+    else:
+        simulated()
     seconds = time.perf_counter() - start
+    positions, energy, inverted, smallest = out
     return Animation(
         name=spec.title,
         positions=positions,
@@ -216,6 +313,7 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None) -> Animati
         model=model,
         pose=pose_table(spec) if spec.pose else None,
         face=spec.face_directory,
+        progress=progress,
     )
 
 

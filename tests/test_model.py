@@ -74,3 +74,15 @@ def test_a_face_simulated_in_cache_order_moves_as_in_its_own(hopper, name, prese
     assert np.allclose(smallest_reordered, smallest, rtol=1e-6, atol=0)
     row = table[-1]
     assert np.abs(muscle_forces(reordered, expected[-1], row) - muscle_forces(own, expected[-1], row)).max() < 1e-9
+
+
+def test_a_face_in_cache_order_simulated_frame_by_frame_in_the_background_gives_the_same_frames(hopper):
+    from facesim.simulate import Progress
+
+    s = spec("happy", frames=12)
+    _, reordered = both_orders(hopper, s.material)
+    table = activation_table(s, reordered.muscles)
+    whole = run(reordered, table, s.dt)[0]
+    progress = Progress()
+    streamed = run(reordered, table, s.dt, progress=progress)[0]  # one frame a call, into the mesh's order frame by frame
+    assert progress.done == len(table) and np.array_equal(streamed, whole)

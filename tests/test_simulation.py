@@ -166,3 +166,44 @@ def test_divergence_raises_with_the_frame():
     with pytest.raises(SimulationError, match=r"at frame \d+") as info:
         facesim.simulate(violent)
     assert info.value.frame is not None and info.value.frame < 35
+
+
+def test_an_animation_simulated_in_the_background_is_the_one_simulated_at_once():
+    """``facesim render`` simulates on a thread of its own while it draws: the frames,
+    energies and checks are the same bits as a simulation run to its end first."""
+    s = spec("surprise")
+    at_once = facesim.simulate(s)
+    background = facesim.simulate(s, background=True).ready()
+    for name in ("positions", "kinetic_energy", "inverted", "smallest_area"):
+        assert np.array_equal(getattr(background, name), getattr(at_once, name)), name
+    assert background.simulation_seconds > 0
+
+
+def simulation_threads():
+    import threading
+
+    return [t for t in threading.enumerate() if t.name == "facesim-simulation"]
+
+
+def test_a_background_simulation_hands_over_each_frame_as_it_is_done_and_stops_when_cancelled():
+    from conftest import wait_for
+
+    long = spec("happy", frames=3000)  # about 2 s of simulation
+    animation = facesim.simulate(long, background=True)
+    animation.ready(0)  # the first frame, long before the last
+    assert animation.progress.done < animation.frames
+    assert np.abs(animation.positions[0] - animation.rest).max() < 0.01  # it starts from rest
+    animation.cancel()
+    wait_for(lambda: not simulation_threads(), timeout=30, what="the simulation to stop")
+    assert animation.progress.done < animation.frames and animation.progress.error is None
+
+
+def test_a_background_simulation_that_diverges_raises_at_the_first_frame_it_did_not_reach():
+    violent = spec("happy", dt=0.5, material=material(preset="thesis", substeps=1))
+    animation = facesim.simulate(violent, background=True)  # returns: the failure comes with the frames
+    with pytest.raises(SimulationError, match=r"at frame \d+") as info:
+        animation.ready()
+    failed = info.value.frame
+    animation.ready(failed - 1)  # the frames before it were simulated, and stay readable
+    with pytest.raises(SimulationError):
+        animation.ready(failed)
