@@ -261,6 +261,18 @@ def run(
     return positions, energy, inverted, smallest
 
 
+def concurrent_kernels() -> bool:
+    """Whether two threads may run facesim's parallel kernels at once: the simulation in the
+    background and the renderer's. Numba's OpenMP and TBB layers allow it; its own
+    workqueue, the fallback on a machine without libgomp or TBB, stops the process when a
+    second thread starts a parallel loop, so there the simulation runs first. Known once a
+    parallel kernel has run in the process (building a model runs one)."""
+    try:
+        return numba.threading_layer() in ("omp", "tbb")
+    except ValueError:  # no parallel kernel run yet
+        return False
+
+
 def diagnostics(frames: int, n: int) -> solver.Diagnostics:
     """Room for a run's output (``run``): positions, kinetic energy, inverted triangles and
     smallest relative area per frame."""
@@ -270,8 +282,9 @@ def diagnostics(frames: int, n: int) -> solver.Diagnostics:
 def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background: bool = False) -> Animation:
     """Simulate an expression spec from the neutral face. ``notice`` receives a one-line
     estimate before a run expected to take minutes. ``background``: return at once and
-    simulate on a thread of its own (module docstring); the spec, mesh and muscles are
-    checked before it starts either way."""
+    simulate on a thread of its own (module docstring), where Numba allows it
+    (``concurrent_kernels``); the spec, mesh and muscles are checked before it starts
+    either way."""
     model = model_for(spec)
     table = activation_table(spec, model.muscles)
     expected = len(table) * model.material.substeps * model.vertex_count / STEP_RATE
@@ -279,7 +292,7 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
         notice(f"{spec.source}: {len(table)} frames x {model.material.substeps} sub-steps x {model.vertex_count:,} "
                f"vertices: about {expected / 60:.0f} minutes of simulation (Ctrl-C stops it)")
     out = diagnostics(len(table), model.vertex_count)
-    progress = Progress() if background else None
+    progress = Progress() if background and concurrent_kernels() else None
 
     def simulated():
         run(model, table, spec.dt, stop_on_inversion, spec.source, out=out, progress=progress)
@@ -291,7 +304,7 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
             progress.fail(error)
 
     start = time.perf_counter()
-    if background:
+    if progress:
         threading.Thread(target=in_background, name="facesim-simulation", daemon=True).start()
     else:
         simulated()

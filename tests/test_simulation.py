@@ -207,3 +207,14 @@ def test_a_background_simulation_that_diverges_raises_at_the_first_frame_it_did_
     animation.ready(failed - 1)  # the frames before it were simulated, and stay readable
     with pytest.raises(SimulationError):
         animation.ready(failed)
+
+
+def test_without_a_thread_safe_numba_layer_the_simulation_runs_before_the_frames(monkeypatch):
+    """Numba's own workqueue layer (a machine without libgomp or TBB) stops the process when
+    two threads start parallel loops at once: the renderer's kernels and the simulation's."""
+    import numba
+
+    monkeypatch.setattr(numba, "threading_layer", lambda: "workqueue")
+    animation = facesim.simulate(spec("happy"), background=True)
+    assert animation.progress is None and animation.seconds > 0
+    assert np.array_equal(animation.positions, facesim.simulate(spec("happy")).positions)
