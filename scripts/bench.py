@@ -840,8 +840,9 @@ script.
   not inlined), the back-projection without branches (93 ns against 69), the kernels
   compiled without `parallel` (195 ns against 141), Intel's SVML (llvmlite here is not
   built for it); earlier, each vertex gathering its springs from its one-ring (20 ns
-  against 13) and a reverse Cuthill-McKee order (within 3%; tonight 240 -> 216 ns in one
-  process, a random order 359: the subdivided meshes' own order is already local). **Not
+  against 13). A reverse Cuthill-McKee order, within 3% when first tried, is now built
+  (the vertex order, first bullet and its table): about a tenth on the subdivided mesh,
+  whose own order is already local, and robustness to a mesh numbered any old way. **Not
   memory alone:** where a mesh's arrays fit in the caches the step still costs 128-210 ns
   at 6,990 vertices and 138-171 ns at 1,790 over this evening's five runs (128 and 138 in
   this one), 1.3 to 2 times the 100 ns that 10 million a second allows; the springs and the edge repulsion together,
