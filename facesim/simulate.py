@@ -8,7 +8,8 @@ that blows up raises :class:`SimulationError` naming the frame and the vertex or
 ``simulate(spec, background=True)`` returns the Animation at once and simulates on a
 thread of its own (the kernels release the GIL), frame by frame into its arrays, so
 that ``facesim render`` draws and encodes the first frames while the later ones are
-simulated; ``Animation.ready(f)`` waits for frame f, and raises the simulation's error
+simulated (a face simulated on one thread; a larger mesh's simulation, which wants
+every core, runs first: ``simulate``); ``Animation.ready(f)`` waits for frame f, and raises the simulation's error
 for a frame it did not reach.
 """
 
@@ -283,8 +284,17 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
     """Simulate an expression spec from the neutral face. ``notice`` receives a one-line
     estimate before a run expected to take minutes. ``background``: return at once and
     simulate on a thread of its own (module docstring), where Numba allows it
-    (``concurrent_kernels``); the spec, mesh and muscles are checked before it starts
-    either way."""
+    (``concurrent_kernels``) and the mesh is simulated on one thread (fewer than
+    ``PARALLEL_FROM`` vertices); the spec, mesh and muscles are checked before it starts
+    either way.
+
+    A larger mesh is simulated first: its simulation wants every core, and the renderer
+    (llvmpipe's rasteriser threads, the frames' preparation, the encoder) already keeps
+    two busy. Happy on the Hopper face subdivided twice (6,990 vertices) to MP4 at 512²,
+    side by side in one process on two cores (2026-12-03): 891 ms simulated first, 1,271
+    overlapped with the simulation on two threads (whose loops wait at their ends for
+    the thread the renderer holds off its core), 1,103 against 1,268 on one thread. The
+    head's 468 vertices: 1,035 -> 988 ms and 1,048 -> 1,013."""
     model = model_for(spec)
     table = activation_table(spec, model.muscles)
     expected = len(table) * model.material.substeps * model.vertex_count / STEP_RATE
@@ -292,7 +302,7 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
         notice(f"{spec.source}: {len(table)} frames x {model.material.substeps} sub-steps x {model.vertex_count:,} "
                f"vertices: about {expected / 60:.0f} minutes of simulation (Ctrl-C stops it)")
     out = diagnostics(len(table), model.vertex_count)
-    progress = Progress() if background and concurrent_kernels() else None
+    progress = Progress() if background and concurrent_kernels() and model.vertex_count < PARALLEL_FROM else None
 
     def simulated():
         run(model, table, spec.dt, stop_on_inversion, spec.source, out=out, progress=progress)

@@ -218,3 +218,15 @@ def test_without_a_thread_safe_numba_layer_the_simulation_runs_before_the_frames
     animation = facesim.simulate(spec("happy"), background=True)
     assert animation.progress is None and animation.seconds > 0
     assert np.array_equal(animation.positions, facesim.simulate(spec("happy")).positions)
+
+
+def test_a_mesh_simulated_on_every_core_is_simulated_before_its_frames_are_drawn(monkeypatch):
+    """Its simulation wants both cores, which the renderer already keeps busy: overlapped, a
+    6,990-vertex face rendered slower, not faster (facesim.simulate.simulate)."""
+    import sys
+
+    simulate_module = sys.modules["facesim.simulate"]  # the module: facesim.simulate is the function
+
+    assert facesim.simulate(spec("happy", frames=3), background=True).progress is not None
+    monkeypatch.setattr(simulate_module, "PARALLEL_FROM", 0)  # the Hopper face as if it were large
+    assert facesim.simulate(spec("happy", frames=3), background=True).progress is None
