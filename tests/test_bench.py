@@ -48,8 +48,8 @@ def test_bench_quick_prints_every_table_with_sensible_figures(tmp_path):
     assert max(f["solvers"]["apex, the default head"].values()) < 0.02
     assert 0 < f["fresh_wall"] < 60 and 50 < f["fresh_peak_mb"] < 4000
     assert len(f["vertex_order"]) == 4 and all(v > 0 for v in f["vertex_order"].values())
-    for run in f["overlap"].values():  # both ways wrote the frames, and the drawing took longer than the simulation alone
-        assert run["frames"] == 35 and run["after"] > run["sim"] > 0 and run["overlapped"] > 0
+    run = f["overlap"]  # both ways wrote the frames, and drawing them took longer than simulating them
+    assert run["frames"] == 35 and run["after"] > run["sim"] > 0 and run["overlapped"] > 0
     for render in f["render"].values():
         assert render["ours"] > 0 and render["floor"] > 0
     for head in f["head"].values():
