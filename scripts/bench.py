@@ -674,14 +674,51 @@ The per-step profile above (each kernel looped in compiled code, so no call over
 where a step's time goes. **The machine moves the figures more than the code does.** This
 run is on an AMD EPYC (Zen 4, 2 cores) whose kernel runs DAMON (`kdamond`) with a scheme
 that pages out memory it finds cold, the page cache included, and samples every page's
-accessed bit twice a second. Tonight's three runs of this script, within an hour and with
-the same simulation code, gave the Hopper face's happy 16.3, 17.7 and 11.8 ms (this run),
-the profile's springs 44.7 µs a step in the second and 21.8 in this one, and the fresh
-render 3.49, 2.95 and 2.47 s (this run); the same fresh-render measurement run alone
+accessed bit twice a second. This run (21:15) and the one before it (21:05), minutes
+apart with the same code, gave the Hopper face's happy 17.4 and 17.9 ms by the thesis's
+update, the profile's springs 26.2 and 49.6 µs a step, the fresh render 2.71 and 3.19 s
+and `prange` 1.67x and 1.66x; the quiet run of 19:07 with the simulation code before
+tonight's vertex order, 11.8 ms, 21.8 µs, 2.47 s and 1.84x. Earlier tonight three runs
+within an hour with the same simulation code gave happy 16.3, 17.7 and 11.8 ms and the
+fresh render 3.49, 2.95 and 2.47 s; the same fresh-render measurement run alone
 between the first two took 2.62 s (median of five) and, a minute later, 3.05 s. On 2026-12-02 the runs were on
 an Intel Xeon. Changes are therefore measured side by side (the old and the new code
 alternating, in one process or in alternating fresh processes), not across runs of this
 script.
+
+- **Night (2026-12-03): the last two means of the issue's point 3, a cache-friendly
+  vertex order and rendering overlapped with the simulation.**
+  - A mesh of at least 4,000 vertices is simulated in a vertex order of its own
+    (facesim.model.reordered): reverse Cuthill-McKee on its edge graph
+    (scipy.sparse.csgraph), the springs, triangles and hinges sorted by their first vertex
+    in it, each vertex's neighbours and ring in their sequence; positions, NPZ files and
+    messages keep the mesh's numbering (tests/test_model.py, which also simulates the
+    Hopper face both ways: the same motion to 1e-6 cm). The vertex-order table above, at
+    27,614 vertices on one thread: 1.00x in this run on the subdivided mesh, whose own
+    order is already local (1.12x in the run before; 300 -> 274 ns when first measured),
+    and 1.68x on the same mesh with its vertices shuffled, as an exported or scanned mesh
+    may number them (1.99x in the run before, 422 -> 267 ns first). With two threads it
+    gains more: 706 -> 540 ms (below, `prange`).
+  - `facesim render` simulates on a thread of its own and draws each frame as soon as it
+    is simulated (facesim.simulate: `simulate(background=True)`, `Animation.ready`); the
+    same bits as a simulation run first, a divergence still fails the render at its frame
+    with nothing written, a failed render stops the simulation (tests/test_simulation.py).
+    Only where Numba's threading layer lets two threads start parallel loops at once
+    (OpenMP, TBB; its own workqueue, the fallback without libgomp, stops the process),
+    and only for a face simulated on one thread: a mesh of 4,000 vertices or more wants
+    both cores, which the renderer (llvmpipe's threads, the frames' preparation, the
+    encoder) already keeps busy. Measured side by side in one process on the Hopper face
+    subdivided twice (6,990 vertices, happy to MP4 at 512²): 891 ms simulated first
+    against 1,271 overlapped with the simulation on two threads, 1,103 against 1,268 on
+    one. On the head 1,035 -> 988 and 1,048 -> 1,013 ms by hand, 1,017 -> 1,022 and 968
+    -> 1,026 in the overlapped-render table of the run before and of this one: its
+    simulation is 20-30 ms of a second, less than this machine's noise. On a machine with
+    cores to spare the overlap would pay more; on this one it is worth at most the
+    head's simulation, and it is kept because it costs nothing there either.
+  - Noticed and left: the Hopper face subdivided twice folds 2-4 of its 13,632 triangles at
+    happy's apex, whichever vertex order and material: slivers of the mouth's slit at its
+    inner corners (0.0003 cm² against a median 0.0135), hidden between the lips. The
+    scaling table simulates on through them, as before.
 
 - **Late evening (2026-12-03): a fresh `facesim render` 3.02 -> 2.63 s (medians of six
   alternating fresh processes, the commit before against after).** Four changes to what
@@ -715,7 +752,7 @@ script.
     time and about four times a step. The vertices are now put in a minimum-degree order
     of their own graph with each vertex's three coordinates together, so that the factors
     are made of 3x3 blocks, and the solves run block by block: 55-70 µs (the profile's
-    "applied once" 54.0 µs in this run, 173.1 this afternoon), the same 180,000 entries.
+    "applied once" 65.0 µs in this run, 54.0 in the quiet one, 173.1 this afternoon), the same 180,000 entries.
     Happy on the head 55 -> 31 ms side by side in one process, the positions the same to
     4e-15 cm; 20.6 ms in this evening's last run against 36.1 in this afternoon's.
     Factorising takes a few ms more, once per model and step (31-56 ms; since tonight
@@ -777,8 +814,9 @@ script.
   step's loops, which also write the links of K, stay scalar and read the positions where
   they are: a gathering pass of their own made them slower (springs 68 -> 84 ns a
   vertex), so they keep the old form (within this machine's noise of it).
-- **Simulation, 2 ms for happy on the Hopper face.** Not met: 11.8 ms by the thesis's
-  update in this run (16.3 and 17.7 in tonight's two runs before it, in a slow hour; 12.8
+- **Simulation, 2 ms for happy on the Hopper face.** Not met: 17.4 ms by the thesis's
+  update in this run and 17.9 in the one before (11.8 in the quiet run of 19:07; 16.3 and
+  17.7 in the two runs before that, in a slow hour; 12.8
   and 12.0 in this evening's two; 12.4, 13.8 and 18.0 this afternoon), four steps a frame, 140 steps of 80-130 µs; the implicit solver takes
   one step a frame, but its step is the force terms, their links of K (a scalar loop of
   their own) and about eight conjugate-gradient iterations, each a product over the links
@@ -799,8 +837,9 @@ script.
   preconditioner: the Hopper face's system at rest factorised (60,275 entries) made happy
   26.6 ms against Jacobi's 22.0 (2026-12-02), each iteration's two triangular solves
   costing more than the iterations they save.
-- **10 million vertex-steps per second per core at 28k vertices.** Not met: 4.55 million
-  in this run (220 ns per vertex-step at 27,614, the scaling table; 3.01 and 3.41 million
+- **10 million vertex-steps per second per core at 28k vertices.** Not met: 3.80 million
+  in this run (263 ns per vertex-step at 27,614, the scaling table; 3.63 million in the
+  run before; 4.55 million, 220 ns, in the quiet run of 19:07; 3.01 and 3.41 million
   in tonight's two runs before it, in a slow hour; 3.45 and 4.11 million in this
   evening's two runs, with the back-projection inlined; 3.7-3.9 million over three
   runs this afternoon), 2.9 million (348 ns) in this morning's with the same
@@ -843,8 +882,12 @@ script.
   27,614 vertices (one process, one thread, 2026-12-03; g within 1e-6 of float64's), the
   loop being bound by its memory, not its lanes, and the scalar scatters and fills
   around it would not change.
-- **`prange`, 2 threads against 1: met, 1.84x in this run at 27,614 (1.54x at 6,990,
-  1.91x at 109,758), 1.77x and 1.78x in tonight's two runs before; 1.60x and 1.42x in this
+- **`prange`, 2 threads against 1: 1.67x in this run at 27,614 and 1.66x in the one
+  before, short of 1.7x (1.77x at 6,990 and 1.92x at 109,758 in this run); met at 1.84x in
+  the quiet run of 19:07, 1.77x and 1.78x in the two before it. Side by side in one process
+  at 27,614 vertices (five alternating runs each, tonight), the vertex order raised it:
+  the mesh's own order 1,024 ms on one thread and 706 on two (1.45x), facesim's cache order
+  933 and 540 (1.73x); so this run's figure is the hour's, not the order's. 1.60x and 1.42x in this
   evening's two runs and 1.49-1.74x over four of the afternoon's, with the same step; met on the Xeon
   (1.71x at 27,614 on 2026-12-02).** Alternating one thread and two in one process
   tonight, the two-thread runs of the same work took 447-759 ms against 890-1,088 for one
@@ -879,8 +922,9 @@ script.
   everything again; facesim's own cache locator files them by a hash of the code and the
   package's name instead (facesim.config), and a copy elsewhere now loads them (a fresh
   render from a copy: 87 s -> 2.7 s; tests/test_cache.py).
-- **The head's frame against its floor, 1.2x: met, 0.93x at 256² and 1.04x at 512² in
-  this run (1.02x and 1.07x, 1.02x and 1.06x in tonight's two before; 1.01x and 1.06x,
+- **The head's frame against its floor, 1.2x: met, 0.94x at 256² and 1.13x at 512² in
+  this run (1.00x and 1.02x in the run before, 0.93x and 1.04x in the quiet run of 19:07;
+  1.02x and 1.07x, 1.02x and 1.06x in the two before that; 1.01x and 1.06x,
   1.11x and 0.99x in this evening's two; 1.25x and 1.20x this afternoon,
   1.13-1.37x at 512² over its three runs).** What closed it is what this paragraph named
   this afternoon as the way to close it: the next frame's skin, normals and vertex arrays
@@ -892,10 +936,11 @@ script.
   and 1.6 ms between draws, the normals 0.4-0.7 ms, the nine parts' vertex arrays written
   in place 0.3 ms, the uploads 0.2 ms, the edge filter 1.3 ms, which the floor also does)
   now runs beside llvmpipe's vertex work instead of after it.
-- **25 frames per second end to end on the head at 512², antialiased: met, 39.8 in this
-  run (32.6 and 31.8 in tonight's two before; 26.5 and 29.7 in this evening's two; 32.3, 29.2 and
+- **25 frames per second end to end on the head at 512², antialiased: met, 35.9 in this
+  run (32.0 in the one before, 39.8 in the quiet run of 19:07, 32.6 and 31.8 in the two
+  before that; 26.5 and 29.7 in this evening's two; 32.3, 29.2 and
   29.6 this afternoon; 20.5 this morning), 34.8 on the Xeon (2026-12-02).** What made it
-  here: the render changes above (facesim's frame 22.9 ms in this run, the floor 22.2; the floor alone was 34-37
+  here: the render changes above (facesim's frame 23.2 ms in this run, the floor 20.5; the floor alone was 34-37
   ms in this morning's run). Measured end to end in one process
   (2026-12-03): 35 frames in 1.05-1.31 s, of which the simulation 0.04 s, drawing 0.84-1.07 s
   with the encoder running beside it on the same two cores (x264 alone takes 0.2 s for
@@ -907,9 +952,10 @@ script.
   `--supersample` keeps the 4 samples), and the head's opaque parts culling their back
   faces (12-15% of a frame). Multisampling costs more in llvmpipe (108 ms at 512² with 2
   or 4 samples, measured on 2026-12-01).
-- **3 s for `facesim render` in a fresh process: met, 2.47 s in this run (nine runs,
-  2.25-2.74 s); 3.49 s (five runs, 3.16-3.63) and 2.95 s (nine runs, 2.44-3.59) in
-  tonight's two runs before it, in a slow hour, with the same code, and 2.62 s, then 3.05
+- **3 s for `facesim render` in a fresh process: met, 2.71 s in this run (nine runs,
+  2.54-2.88 s), missed at 3.19 s (2.96-3.31) in the run before it ten minutes earlier;
+  2.47 s (nine runs, 2.25-2.74 s) in the quiet run of 19:07; 3.49 s (five runs, 3.16-3.63)
+  and 2.95 s (nine runs, 2.44-3.59) in the two runs before that, in a slow hour, with the same code, and 2.62 s, then 3.05
   s, for the same five-run measurement alone between them. By hand tonight 2.59-2.77 s. Before tonight's changes (late evening, above): 3.98 and 3.38 s in
   this evening's two runs, 3.02, 3.06 and 3.58 s in this afternoon's three, 2.64 s on the
   Xeon.** On this machine the target is met when the second core is free and missed when
@@ -948,18 +994,18 @@ script.
   0.5 s), Numba's cached kernels loaded 0.6 s, the simulation 0.3 s, the writing 2.5 s.
   Taking SciPy's assignment solver out of the head's mirror map saved nothing, since
   trimesh imports the same modules (tried, reverted).
-- **50 ms for happy on the head: met, 19.4 ms in this run (22.1 and 27.2 in tonight's two
-  before, 20.6 and 19.6 in this evening's two; 36.1, 45.1 and 49.3 this afternoon, 38.1 this
+- **50 ms for happy on the head: met, 22.6 ms in this run (31.7 in the one before, 19.4 in
+  the quiet run of 19:07, 22.1 and 27.2 in the two before that, 20.6 and 19.6 in this evening's two; 36.1, 45.1 and 49.3 this afternoon, 38.1 this
   morning)** (38 ms on the Xeon), since the preconditioner's solves by blocks (above);
-  the head's table above, which times the same run in a process of its own, gives 19.9
-  and 22.5 ms in this run
+  the head's table above, which times the same run in a process of its own, gives 19.8
+  and 22.0 ms in this run
   (51.6-54.2 in this morning's). That is this machine's noise between processes, not pyrender: the median of
   nine runs in six fresh processes was 42-58 ms, alike whether pyrender was imported
   and a GL context made first or not (2026-12-03), before the preconditioner by blocks.
   Side by side in
   one process (2026-12-01), the head's tied rim (issue 16) costs 7% over a pinned one.
-  The profile above names the force terms (117 µs a step in this run, 213 in tonight's
-  slow one, the edge repulsion the largest) and the conjugate gradients' products (46 µs
+  The profile above names the force terms (138 µs a step in this run, 117 in the quiet
+  one, 213 in a slow one, the edge repulsion the largest) and the conjugate gradients' products (46 µs
   each, three or four a step) as the largest parts of a step, then the preconditioner
   (54 µs, four a step).
 """
