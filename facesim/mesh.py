@@ -33,6 +33,13 @@ def csr_from_pairs(rows: np.ndarray, cols: np.ndarray, n: int) -> tuple[np.ndarr
     return np.cumsum(start), cols[order].astype(np.int64)
 
 
+def inverse_permutation(order: np.ndarray) -> np.ndarray:
+    """``place`` with ``place[order[k]] = k``: where each item of an order sits in it."""
+    place = np.empty_like(order)
+    place[order] = np.arange(len(order))
+    return place
+
+
 def unique_edges(faces: np.ndarray) -> np.ndarray:
     """(e, 2) int64: the unique undirected edges of triangles, smaller index first."""
     e = np.sort(np.asarray(faces)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)

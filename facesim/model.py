@@ -31,6 +31,7 @@ and folded three lip-corner triangles; with √s it settles and folds none.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -40,7 +41,7 @@ from .cache import cached_arrays, key
 from .config import CODE_DIGEST
 from .errors import InputError
 from .kernels import ModelArrays
-from .mesh import FaceMesh, csr_from_pairs
+from .mesh import FaceMesh, csr_from_pairs, inverse_permutation
 from .muscles import SPHINCTER, MuscleSet
 from .rig import Rig, build_rig
 from .schema import Strict
@@ -195,11 +196,13 @@ class Model:
 
     def in_mesh_order(self, per_vertex: np.ndarray, axis: int = 0) -> np.ndarray:
         """Rows per kernel vertex (along ``axis``) in the mesh's vertex order."""
-        if self.vertex_order is None:
-            return per_vertex
-        place = np.empty_like(self.vertex_order)
-        place[self.vertex_order] = np.arange(len(place))
-        return np.take(per_vertex, place, axis=axis)
+        return per_vertex if self.vertex_order is None else np.take(per_vertex, self._vertex_place, axis=axis)
+
+    @cached_property
+    def _vertex_place(self) -> np.ndarray:
+        """Where each mesh vertex sits in the kernels' order (found once: a background
+        simulation maps every frame back)."""
+        return inverse_permutation(self.vertex_order)
 
     def mesh_vertex(self, k):
         """The mesh's numbers of the kernels' vertices k (a number or an array of them)."""
@@ -399,8 +402,7 @@ def reordered(arrays: ModelArrays, order: np.ndarray) -> tuple[ModelArrays, np.n
     and scatters to vertices close in memory. Returns the arrays and the triangles' order
     (triangle k is the mesh's ``triangle_order[k]``). Each corner keeps its place in its
     triangle (its winding), and each vertex its neighbours' and ring's sequence."""
-    place = np.empty_like(order)
-    place[order] = np.arange(len(order))
+    place = inverse_permutation(order)
     a = arrays._asdict()
     new = {key: a[key][order] for key in PER_VERTEX}
     new.update({key: place[a[key]] for key in VERTEX_VALUED})

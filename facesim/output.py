@@ -119,10 +119,11 @@ def iter_frames(animation: Animation, settings: RenderSettings, backend: str = "
     own renderer. ``renderer`` lets a caller reuse one across animations of one mesh.
     """
     frames = animation.frames
-    if settings.show_muscles or not (jobs <= 1 or frames < 2 * jobs):
+    in_process = jobs <= 1 or frames < 2 * jobs
+    if settings.show_muscles or not in_process:
         animation.ready()  # the arrows, and the processes' chunks, take every frame at once
     arrows = arrows_for(animation) if settings.show_muscles else None
-    if jobs <= 1 or frames < 2 * jobs:
+    if in_process:
         own = renderer is None
         renderer = renderer or FaceRenderer.of(animation, settings, backend)
         try:

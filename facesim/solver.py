@@ -54,6 +54,7 @@ from numba import njit, prange
 from . import kernels
 from .config import NUMBA_OPTIONS, PARALLEL_OPTIONS
 from .kernels import INVERTED, NOT_FINITE, OK, RUNAWAY
+from .mesh import inverse_permutation
 
 #: The preconditioner of the implicit step: P A Pᵀ = L U for the system A at rest
 #: (``rest_preconditioner``), P putting vertex ``order[J]`` J-th with its three
@@ -227,8 +228,7 @@ def rest_preconditioner(model, h: float) -> Factor:
     dominant = (diags(np.asarray(graph.sum(axis=1)).ravel() + 1.0) - graph).tocsc()
     order = np.argsort(splu(dominant, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                             options=dict(SymmetricMode=True)).perm_c)
-    place = np.empty(n, dtype=np.int64)
-    place[order] = np.arange(n)
+    place = inverse_permutation(order)
     size = 3 * n + 144 * forces.along.shape[0]
     rows, columns, values = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64), np.empty(size)
     count = _system_entries(arrays, forces, h, place, rows, columns, values)

@@ -366,16 +366,15 @@ def vertex_orders(level: int, repeats: int) -> tuple[str, dict]:
     vertex order and in facesim's cache order (facesim.model.reordered), and the same for
     the mesh with its vertices shuffled (as an exported or scanned mesh may number them):
     the four models alternating, each the median of its runs."""
-    from facesim.mesh import FaceMesh
+    from facesim.mesh import FaceMesh, inverse_permutation
 
     base = load_mesh(HOPPER_MESH)
     carried = muscles_as_points(load_model(HOPPER_MUSCLES, MuscleFile), base)
     spec = thesis_spec("happy")
     mesh = subdivide(base, level)
     shuffle = np.random.default_rng(1).permutation(mesh.vertex_count)
-    place = np.empty_like(shuffle)
-    place[shuffle] = np.arange(len(shuffle))
-    meshes = {"the subdivided mesh's own": mesh, "shuffled": FaceMesh(mesh.vertices[shuffle], place[mesh.faces])}
+    meshes = {"the subdivided mesh's own": mesh,
+              "shuffled": FaceMesh(mesh.vertices[shuffle], inverse_permutation(shuffle)[mesh.faces])}
     models = {(label, reorder): build_model(m, resolve_muscles(carried, m, label), spec.material, reorder=reorder)
               for label, m in meshes.items() for reorder in (False, True)}
     first = next(iter(models.values()))
