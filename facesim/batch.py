@@ -9,14 +9,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import FacesimError, InputError
-from .render import RenderSettings, shared_renderer
+from .renderer.scene import RenderSettings, shared_renderer
 from .workers import worker_pool
 
 
 def collect_specs(inputs: list[Path]) -> list[Path]:
     """Spec files from files and directories (their *.yaml, sorted), in order given; a
     bare name that is no file here is a spec of the library (``happy``)."""
-    from .spec import library_spec
+    from .animation.spec import library_spec
 
     specs: list[Path] = []
     for item in map(library_spec, inputs):
@@ -43,9 +43,9 @@ def render_one(spec_path: Path, output: Path, settings: RenderSettings, backend:
                mesh: Path | None = None, muscles: Path | None = None, identity: int | None = None,
                face: Path | None = None) -> BatchResult:
     """Load, simulate, render and write one spec; errors become a result, not an exception."""
-    from .output import check_output, output_kind, write_animation
-    from .simulate import simulate
-    from .spec import load_spec
+    from .export.output import check_output, output_kind, write_animation
+    from .animation.simulate import simulate
+    from .animation.spec import load_spec
 
     try:
         spec = load_spec(spec_path).with_overrides(mesh=mesh, muscles=muscles, identity=identity, face=face)

@@ -17,7 +17,7 @@ import typer
 
 from .errors import FacesimError, InputError
 from .workers import capped_jobs
-from .writers import Terminated, check_destination, handling_termination, terminating_signal
+from .files import Terminated, check_destination, handling_termination, terminating_signal
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
                   help="Anatomy-based facial expression animation: simulate a muscle-driven face and render it offscreen.")
@@ -63,7 +63,7 @@ def handled(command):
 
 def settings_from(size: str, camera: str, wireframe: bool = False, show_muscles: bool = False, antialias: bool = True,
                   framing: str = "face", look: str = "auto", onto: Path | None = None, supersample: bool = False):
-    from .render import RenderSettings, parse_size
+    from .renderer.scene import RenderSettings, parse_size
 
     width, height = parse_size(size)
     return RenderSettings(width, height, camera, wireframe, show_muscles, antialias, framing, look, onto, supersample)
@@ -127,9 +127,9 @@ def render(
     blend: Optional[str] = typer.Option(None, "--blend", help="blend expressions, e.g. happy=0.6,surprise=0.4"),
 ):
     """Simulate one expression spec (or a blend of expressions) and render it."""
-    from .output import check_output, progress_bar, write_animation
-    from .simulate import simulate
-    from .spec import blend_spec, load_spec
+    from .export.output import check_output, progress_bar, write_animation
+    from .animation.simulate import simulate
+    from .animation.spec import blend_spec, load_spec
 
     positive(jobs, "--jobs")
     jobs = capped_jobs(jobs, notice)
@@ -146,13 +146,14 @@ def render(
     if onto is not None:  # the frames take the photo's size, and the photo is checked against the face
         from dataclasses import replace
 
-        from .own_face import onto_photo
+        from .face.own_face import onto_photo
 
         height, width = onto_photo(loaded.face_directory, onto)[0].shape[:2]
         settings = replace(settings, width=width, height=height)
     output = output or Path("out") / f"{loaded.title}.mp4"
     check_output(output, force, settings)
-    animation = simulate(loaded, notice=notice, background=True)  # drawn and encoded as its frames come
+    # drawn and encoded as its frames come; the muscles' arrows take every frame at once
+    animation = simulate(loaded, notice=notice, background=True, with_muscle_forces=show_muscles)
     try:
         with progress_bar(animation.frames, f"rendering {loaded.title}") as advance:
             report = write_animation(animation, output, settings, fps, backend, jobs, advance, replace=force)
@@ -189,7 +190,7 @@ def batch(
     from rich.table import Table
 
     from .batch import collect_specs, run_batch
-    from .output import progress_bar
+    from .export.output import progress_bar
 
     positive(jobs, "--jobs")
     if scheduler is None:
@@ -201,7 +202,7 @@ def batch(
         raise InputError(f"--format: expected mp4, gif, npz or png, got {fmt!r}")
     settings = settings_from(size, camera, antialias=antialias, framing=framing, look=look)
     if face is not None:
-        from .own_face import load_face_directory
+        from .face.own_face import load_face_directory
 
         face = load_face_directory(face).path  # checked once, before any spec
     specs = collect_specs(inputs)
@@ -232,8 +233,8 @@ def batch(
 @handled
 def validate(specs: list[Path] = typer.Argument(..., help="spec files")):
     """Check specs (schema, muscles, mesh) without simulating."""
-    from .simulate import model_for
-    from .spec import activation_table, load_spec
+    from .animation.simulate import model_for
+    from .animation.spec import activation_table, load_spec
 
     bad = 0
     for path in specs:
@@ -254,9 +255,10 @@ def validate(specs: list[Path] = typer.Argument(..., help="spec files")):
 def info(mesh: Optional[Path] = MESH, muscles: Optional[Path] = MUSCLES):
     """The face mesh, its muscles, and which OpenGL backends work here."""
     from .config import DEFAULT_MESH, default_muscles
-    from .mesh import load_face
-    from .muscles import SPHINCTER, load_muscles
-    from .render import BACKENDS
+    from .face.loading import load_face
+    from .face.muscle_file import load_muscles
+    from .physics.muscles import SPHINCTER
+    from .renderer.scene import BACKENDS
 
     mesh_path = mesh or DEFAULT_MESH
     muscles = muscles or default_muscles(mesh_path)
@@ -290,14 +292,15 @@ def muscles_command(
     from rich.table import Table
 
     from .config import DEFAULT_MESH, default_muscles
-    from .model import Material, build_model
-    from .mesh import load_face
-    from .muscles import SPHINCTER, load_muscles
-    from .plots import muscle_regions, plot_muscles
-
+    from .face.material import face_model
+    from .face.loading import load_face
+    from .face.muscle_file import load_muscles
+    from .physics.muscles import SPHINCTER
+    from .export.plots import plot_muscles
+    from .physics.run import muscle_regions
     mesh = mesh or DEFAULT_MESH
     face = load_face(mesh)
-    model = build_model(face, load_muscles(muscles or default_muscles(mesh), face), Material())
+    model = face_model(face, load_muscles(muscles or default_muscles(mesh), face))
     regions = muscle_regions(model)
     m = model.muscles
     table = Table(title=f"{model.muscle_count} muscles; controls: {', '.join(m.controls) or 'none'}")
@@ -312,7 +315,7 @@ def muscles_command(
         table.add_row(name, *ends, f"{m.falloff[k, 0]:g}-{m.falloff[k, 1]:g}", f"{m.force[k]:g}", f"{len(regions[k])} vertices")
     Console(width=140).print(table)
     if plot:
-        plot_muscles(model, plot)
+        plot_muscles(model, regions, plot)
         typer.echo(f"wrote {plot}", err=True)
 
 
@@ -337,10 +340,10 @@ def sheet(
     expression that fails to simulate gets an empty cell saying where, and exit code 1."""
     from .batch import collect_specs
     from .errors import SimulationError
-    from .plots import contact_sheet
-    from .render import BACKGROUND, FaceRenderer
-    from .simulate import simulate
-    from .spec import load_spec
+    from .export.plots import contact_sheet
+    from .renderer.scene import BACKGROUND, FaceRenderer
+    from .animation.simulate import simulate
+    from .animation.spec import load_spec
 
     positive(columns, "--columns")
     if output.suffix.lower() != ".png":
@@ -406,12 +409,12 @@ def dataset(
 ):
     """Render N labelled expressions (PNG + labels + manifest) for training recognisers."""
     from .dataset import DatasetSettings, build_dataset, dataset_sheet
-    from .output import progress_bar
-    from .render import parse_size
+    from .export.output import progress_bar
+    from .renderer.scene import parse_size
 
     width, height = parse_size(size)
     if face is not None:
-        from .own_face import load_face_directory
+        from .face.own_face import load_face_directory
 
         face = load_face_directory(face).path
     settings = DatasetSettings(seed, width, height, jitter, backend, clip, None if face is None else str(face), look)
@@ -429,8 +432,7 @@ def mesh_info(mesh: Path = typer.Argument(..., help="a mesh file (OBJ, PLY, GLB,
     """Vertices, triangles, openings, scale and orientation of a mesh, which muscle file
     fits it, and what is wrong with it. Exit code 1 when something is."""
     from .config import HOPPER_MESH, HOPPER_MUSCLES
-    from .mesh import diagnose, load_mesh
-
+    from .face.loading import diagnose, load_mesh
     face = load_mesh(mesh)
     default = load_mesh(HOPPER_MESH)
     v = face.vertices
@@ -464,10 +466,10 @@ def mesh_landmarks(
     from rich.console import Console
     from rich.table import Table
 
-    from .align import propose_landmarks
+    from .face.align import propose_landmarks
     from .config import HOPPER_MESH
-    from .mesh import load_mesh
-    from .writers import atomic_path
+    from .face.loading import load_mesh
+    from .files import atomic_path
 
     if output:
         check_destination(output, force)
@@ -497,12 +499,12 @@ def mesh_align(
     (a similarity fit) and write it with the Hopper face's muscles carried to it by position."""
     import yaml
 
-    from .align import align, load_landmarks
+    from .face.align import align, load_landmarks
     from .config import HOPPER_MESH, HOPPER_MUSCLES
-    from .mesh import check_face, load_mesh, obj_text
-    from .muscles import MuscleFile, load_muscles, muscles_as_points
+    from .face.loading import check_face, load_mesh, obj_text
+    from .face.muscle_file import MuscleFile, load_muscles, muscles_as_points
     from .schema import load_model
-    from .writers import atomic_path
+    from .files import atomic_path
 
     muscles_out = muscles_out or output.with_suffix("").with_suffix(".muscles.yaml")
     for path in (output, muscles_out):
@@ -530,7 +532,7 @@ def mesh_from_photo_command(
     force: bool = FORCE,
 ):
     """Build a face mesh (MediaPipe topology, cm) from one photo. Needs facesim[photo]."""
-    from .photo import mesh_from_photo
+    from .face.photo import mesh_from_photo
 
     check_destination(output, force)
     built = mesh_from_photo(photo, output, symmetric=symmetrise, replace=force)
@@ -546,7 +548,7 @@ def face_from_photo_command(
 ):
     """Fit the head (ICT's identity modes) and a camera to a photo's face and bake the
     photo into its texture. Needs facesim[photo]."""
-    from .own_face import FACE_FILES, face_from_photo
+    from .face.own_face import FACE_FILES, face_from_photo
 
     check_destination(output, force, directory=True, names=FACE_FILES)
     record = face_from_photo(photo, output, replace=force, notice=notice)

@@ -8,15 +8,18 @@ import hashlib
 import os
 from pathlib import Path
 
+#: facesim's version (pyproject.toml reads it from here).
+VERSION = "0.1.0"
+
 #: Options for every ``@njit`` kernel. ``cache=True`` keeps compiled code on disk so that
 #: a second process does not compile again. ``error_model="numpy"``: a division by zero
-#: gives inf or NaN, which the simulation reports with its frame (``kernels._not_finite``
+#: gives inf or NaN, which the simulation reports with its frame (``physics.numerics._not_finite``
 #: reads the bits, which ``fastmath`` cannot fold away), instead of raising
 #: ZeroDivisionError out of a kernel.
 NUMBA_OPTIONS = dict(cache=True, nogil=True, fastmath=True, error_model="numpy")
 #: The kernels whose loops run on several cores (``prange``): per vertex, per link in
 #: ``CHUNKS`` fixed slices of the springs, pairs and hinges, each slice scattering into
-#: its own buffer and the buffers summed per vertex in slice order (facesim.kernels), so
+#: its own buffer and the buffers summed per vertex in slice order (facesim.physics.numerics), so
 #: a run gives the same bits on one thread as on four.
 PARALLEL_OPTIONS = dict(NUMBA_OPTIONS, parallel=True)
 CHUNKS = 2
@@ -37,8 +40,8 @@ def _code_digest() -> str:
     kernel names the module it was compiled in, and the same code imported under another
     name (a vendored copy) cannot load it."""
     digest = hashlib.sha1(__name__.rpartition(".")[0].encode() + b"\0")
-    for path in sorted(PACKAGE_DIR.glob("*.py")):
-        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    for path in sorted(PACKAGE_DIR.rglob("*.py")):
+        digest.update(path.relative_to(PACKAGE_DIR).as_posix().encode() + b"\0" + path.read_bytes())
     return digest.hexdigest()
 
 
@@ -73,11 +76,13 @@ def _key_numba_cache() -> None:
     class CodeKeyedLocator(provided):
         def __init__(self, py_func, py_file):
             super().__init__(py_func, py_file)
-            self._cache_path = os.path.join(numba.config.CACHE_DIR or os.fspath(directory()), folder)
+            # one folder per subpackage: a file's kernels are indexed by its name alone
+            subpackage = Path(py_file).resolve().parent.relative_to(PACKAGE_DIR)
+            self._cache_path = os.path.join(numba.config.CACHE_DIR or os.fspath(directory()), folder, subpackage)
 
         @classmethod
         def from_function(cls, py_func, py_file):
-            if Path(py_file).resolve().parent != PACKAGE_DIR:
+            if not Path(py_file).resolve().is_relative_to(PACKAGE_DIR):
                 return None
             # Numba's own steps past its CACHE_DIR test: the file exists, the folder is
             # writable (else the next locator, or no cache)

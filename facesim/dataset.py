@@ -46,7 +46,7 @@ import numpy as np
 
 from .errors import FacesimError, InputError, SimulationError
 from .workers import capped_jobs, worker_pool
-from .writers import atomic_path
+from .files import atomic_path
 
 #: Samples in flight per worker: enough to keep each busy, few enough that memory stays
 #: flat however many samples a run asks for.
@@ -93,7 +93,7 @@ def sample(seed: int, index: int, available_aus: list[str]) -> dict:
 
 
 def available_action_units(muscle_names) -> list[str]:
-    from .timeline import ACTION_UNITS, au_muscles
+    from .animation.timeline import ACTION_UNITS, au_muscles
 
     out = []
     for au in ACTION_UNITS:
@@ -112,9 +112,9 @@ def sample_id(index: int) -> str:
 def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
     """Draw, simulate, render and write sample ``index``; returns its id. Skips a
     finished sample."""
-    from .head import identity_weights
-    from .simulate import model_for, simulate
-    from .spec import Spec
+    from .face.head import identity_weights
+    from .animation.simulate import model_for, simulate
+    from .animation.spec import Spec
 
     root = Path(directory)
     sid = sample_id(index)
@@ -148,7 +148,7 @@ def _render_sample(root: Path, sid: str, animation, draw: dict, settings: Datase
     """Render a simulated sample, write its image (and clip); the label's fields for it."""
     import imageio.v3 as iio
 
-    from .render import RenderSettings, shared_renderer
+    from .renderer.scene import RenderSettings, shared_renderer
 
     renderer = shared_renderer(animation.rest, animation.faces, RenderSettings(settings.width, settings.height, look=settings.look),
                                settings.backend, animation.figure, animation.face)
@@ -156,7 +156,7 @@ def _render_sample(root: Path, sid: str, animation, draw: dict, settings: Datase
     renderer.view(yaw, pitch, light)
     pose = {name: float(draw[name]) if settings.jitter else 0.0 for name in POSE_JITTER}
     if settings.clip:
-        from .output import write_frames
+        from .export.output import write_frames
 
         frames = np.stack(list(renderer.frames(animation, pose=tuple(pose.values()))))
         write_frames(frames, root / "clips" / f"{sid}.mp4", "mp4", animation.fps)
@@ -321,7 +321,7 @@ def read_manifest(path: Path) -> list[dict]:
 
 def check_settings(settings: DatasetSettings) -> None:
     """Every setting checked before anything is written (dataset.json records them)."""
-    from .render import BACKENDS, RenderSettings
+    from .renderer.scene import BACKENDS, RenderSettings
 
     if settings.seed < 0:
         raise InputError(f"--seed: expected a non-negative integer, got {settings.seed}")
@@ -364,8 +364,7 @@ def dataset_sheet(directory: Path, output: Path, count: int = 12, columns: int =
     """The first ``count`` samples in a labelled grid."""
     import imageio.v3 as iio
 
-    from .plots import contact_sheet
-
+    from .export.plots import contact_sheet
     chosen = [r for r in read_manifest(next(directory.glob("manifest.*"))) if r["status"] == "ok"][:count]
     if not chosen:
         raise InputError(f"{directory}: no finished samples to show")

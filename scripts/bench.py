@@ -29,12 +29,14 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import facesim  # noqa: E402
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES  # noqa: E402
-from facesim.mesh import load_mesh, subdivide  # noqa: E402
-from facesim.model import Material, build_model  # noqa: E402
-from facesim.muscles import MuscleFile, muscles_as_points, resolve_muscles  # noqa: E402
+from facesim.face.loading import load_mesh  # noqa: E402
+from facesim.physics.mesh import subdivide  # noqa: E402
+from facesim.face.material import MaterialSpec, face_model  # noqa: E402
+from facesim.face.muscle_file import MuscleFile, muscles_as_points, resolve_muscles  # noqa: E402
 from facesim.schema import load_model  # noqa: E402
-from facesim.simulate import model_for, run  # noqa: E402
-from facesim.spec import activation_table  # noqa: E402
+from facesim.animation.simulate import model_for  # noqa: E402
+from facesim.physics.run import run  # noqa: E402
+from facesim.animation.spec import activation_table  # noqa: E402
 from conftest import held_apex  # noqa: E402  (tests/: the solvers' comparison the tests make)
 
 EXPRESSIONS = ROOT / "expressions"
@@ -46,7 +48,7 @@ THESIS_FACE = f".with_overrides(mesh={str(HOPPER_MESH)!r})"
 def solved_by(name: str, **material):
     """An expression of the library on the default head, with material fields changed."""
     spec = facesim.load_spec(EXPRESSIONS / f"{name}.yaml")
-    return spec.with_overrides(material=Material.model_validate({**spec.material.model_dump(exclude_unset=True), **material}))
+    return spec.with_overrides(material=MaterialSpec.model_validate({**spec.material.model_dump(exclude_unset=True), **material}))
 
 
 def thesis_spec(name: str, solver: str = "quasi-implicit", **changes):
@@ -54,7 +56,7 @@ def thesis_spec(name: str, solver: str = "quasi-implicit", **changes):
     ``thesis`` material preset: no bending, the hypodermis kept), by the thesis's update unless
     ``solver`` says otherwise."""
     spec = facesim.load_spec(EXPRESSIONS / f"{name}.yaml")
-    material = Material.model_validate({**spec.material.model_dump(exclude_unset=True), "preset": "thesis", "solver": solver})
+    material = MaterialSpec.model_validate({**spec.material.model_dump(exclude_unset=True), "preset": "thesis", "solver": solver})
     return spec.with_overrides(material=material, mesh=HOPPER_MESH, **changes)
 
 
@@ -136,8 +138,8 @@ def simulate_seconds(name: str, repeats: int, **changes) -> list[float]:
 RENDER_CODE = """
 import json, os, sys, time, statistics
 import numpy as np, facesim
-from facesim.render import FaceRenderer, RenderSettings
-from facesim.output import write_frames
+from facesim.renderer.scene import FaceRenderer, RenderSettings
+from facesim.export.output import write_frames
 names, size, repeats, backend = {names!r}, {size}, {repeats}, {backend!r}
 out = {{}}
 renderer = None
@@ -213,10 +215,10 @@ def solvers(repeats: int, names: list[str]) -> tuple[str, dict]:
                   "implicit, ms (steps per frame)", "ratio"],
                  [["the Hopper face", f"{slow:.2f} ({slow_steps})", f"{fast:.2f} ({fast_steps})", f"{slow / fast:.2f}x"]])
     # without bending the calibrated smile folds at frame 4: timed all the same (the same steps), not stopped
-    (flat, _), (bent, _) = (warm_ms(solved_by("happy", bending=kb), stop_on_inversion=False) for kb in (0.0, Material().bending))
+    (flat, _), (bent, _) = (warm_ms(solved_by("happy", bending=kb), stop_on_inversion=False) for kb in (0.0, MaterialSpec().bending))
     figures["the default head"] = dict(implicit=bent, no_bending=flat)
     text += "\n\n" + table(["happy, 35 frames, warm, implicit, one step per frame", "without bending (folds at frame 4), ms",
-                              f"with bending (k_b = {Material().bending:g}, the default), ms", "ratio"],
+                              f"with bending (k_b = {MaterialSpec().bending:g}, the default), ms", "ratio"],
                              [["the default head", f"{flat:.2f}", f"{bent:.2f}", f"{bent / flat:.2f}x"]])
     apex_rows = []
     for face, label, reference_spec, fast_spec in (
@@ -260,11 +262,12 @@ t0 = time.perf_counter()
 import facesim
 t1 = time.perf_counter()
 spec = facesim.load_spec("expressions/happy.yaml"){face}
-from facesim.simulate import model_for, run
-from facesim.spec import activation_table
+from facesim.animation.simulate import model_for
+from facesim.physics.run import run
+from facesim.animation.spec import activation_table
 m = model_for(spec); tab = activation_table(spec, m.muscles)
 t2 = time.perf_counter(); run(m, tab, spec.dt); t3 = time.perf_counter(); run(m, tab, spec.dt); t4 = time.perf_counter()
-from facesim.solver import _simulate
+from facesim.physics.solver import _simulate
 hits, misses = sum(_simulate.stats.cache_hits.values()), sum(_simulate.stats.cache_misses.values())
 print(json.dumps(dict(imports=t1 - t0, first=t3 - t2, warm=t4 - t3, loaded=hits, compiled=misses)))
 """
@@ -316,7 +319,7 @@ def scaling(levels: int, repeats: int, plot: Path | None) -> tuple[str, dict]:
     base_steps = None
     for level in range(levels + 1):
         mesh = subdivide(base, level) if level else base
-        model = build_model(mesh, resolve_muscles(carried, mesh, f"level {level}"), spec.material)
+        model = face_model(mesh, resolve_muscles(carried, mesh, f"level {level}"), spec.material)
         base_steps = base_steps or model.material.substeps
         # a finer mesh takes more sub-steps per frame (facesim.model); keep the number of
         # steps of the default face's 35 frames by simulating fewer frames
@@ -363,11 +366,10 @@ def scaling(levels: int, repeats: int, plot: Path | None) -> tuple[str, dict]:
 
 def vertex_orders(level: int, repeats: int) -> tuple[str, dict]:
     """Happy on the Hopper face Loop-subdivided ``level`` times, one thread, in the mesh's own
-    vertex order and in facesim's cache order (facesim.model.reordered), and the same for
+    vertex order and in facesim's cache order (facesim.physics.model.reordered), and the same for
     the mesh with its vertices shuffled (as an exported or scanned mesh may number them):
     the four models alternating, each the median of its runs."""
-    from facesim.mesh import FaceMesh, inverse_permutation
-
+    from facesim.physics.mesh import FaceMesh, inverse_permutation
     base = load_mesh(HOPPER_MESH)
     carried = muscles_as_points(load_model(HOPPER_MUSCLES, MuscleFile), base)
     spec = thesis_spec("happy")
@@ -375,7 +377,7 @@ def vertex_orders(level: int, repeats: int) -> tuple[str, dict]:
     shuffle = np.random.default_rng(1).permutation(mesh.vertex_count)
     meshes = {"the subdivided mesh's own": mesh,
               "shuffled": FaceMesh(mesh.vertices[shuffle], inverse_permutation(shuffle)[mesh.faces])}
-    models = {(label, reorder): build_model(m, resolve_muscles(carried, m, label), spec.material, reorder=reorder)
+    models = {(label, reorder): face_model(m, resolve_muscles(carried, m, label), spec.material, reorder=reorder)
               for label, m in meshes.items() for reorder in (False, True)}
     first = next(iter(models.values()))
     frames = max(4, round(35 * 4 / first.material.substeps))
@@ -399,7 +401,7 @@ def vertex_orders(level: int, repeats: int) -> tuple[str, dict]:
 RENDER_FLOOR_CODE = """
 import json, time, statistics
 import numpy as np, facesim
-from facesim.render import FaceRenderer, RenderSettings
+from facesim.renderer.scene import FaceRenderer, RenderSettings
 size, repeats, frames = {size}, {repeats}, 35
 a = facesim.simulate(facesim.load_spec("expressions/happy.yaml"){face})
 r = FaceRenderer(a.rest, a.faces, RenderSettings(size, size), {backend!r})
@@ -418,8 +420,8 @@ print(json.dumps(dict(ours=statistics.median(ours), floor=statistics.median(floo
 
 PROCESSES_CODE = """
 import json, time, numpy as np, facesim
-from facesim.output import render_frames
-from facesim.render import RenderSettings
+from facesim.export.output import render_frames
+from facesim.renderer.scene import RenderSettings
 spec = facesim.load_spec("expressions/happy.yaml"){face}.with_overrides(frames={frames})
 a = facesim.simulate(spec)
 out = {{}}
@@ -448,11 +450,12 @@ HEAD_CODE = """
 import json, statistics, tempfile, time
 from pathlib import Path
 import numpy as np, facesim
-from facesim.kernels import _vertex_normals
-from facesim.output import write_frames
-from facesim.render import FaceRenderer, RenderSettings
-from facesim.simulate import model_for, run
-from facesim.spec import activation_table
+from facesim.geometry import _vertex_normals
+from facesim.export.output import write_frames
+from facesim.renderer.scene import FaceRenderer, RenderSettings
+from facesim.animation.simulate import model_for
+from facesim.physics.run import run
+from facesim.animation.spec import activation_table
 size, repeats, backend = {size}, {repeats}, {backend!r}
 spec = facesim.load_spec("expressions/happy.yaml")
 model = model_for(spec)
@@ -493,7 +496,7 @@ for _ in range(repeats):
     t = time.perf_counter(); write_frames(frames, Path(tempfile.mkdtemp()) / "head.mp4", "mp4", 25); encode.append(time.perf_counter() - t)
 r.close()
 # end to end as `facesim render` runs it: simulated in the background while drawn, each frame encoded while the next draws
-from facesim.output import write_animation
+from facesim.export.output import write_animation
 e2e = {{}}
 for key, settings in (("fps", RenderSettings(size, size)), ("fps_supersample", RenderSettings(size, size, supersample=True)),
                       ("fps_plain", RenderSettings(size, size, antialias=False))):
@@ -515,8 +518,8 @@ OVERLAP_CODE = """
 import json, statistics, tempfile, time
 from pathlib import Path
 import facesim
-from facesim.output import write_animation
-from facesim.render import FaceRenderer, RenderSettings
+from facesim.export.output import write_animation
+from facesim.renderer.scene import FaceRenderer, RenderSettings
 size, repeats = {size}, {repeats}
 root = Path(tempfile.mkdtemp())
 spec = facesim.load_spec("expressions/happy.yaml")
@@ -589,23 +592,25 @@ def _looped():
     """A compiled loop over one kernel, so a profile's figures carry no call overhead."""
     from numba import njit
 
-    from facesim import kernels, solver
+    from facesim.physics import solver
+
+    from facesim.physics import bending, damping, muscle_forces, repulsion, springs, tissue
 
     @njit
     def looped(which, repeats, model, xp, control, work, forces, krylov, h):
         for _ in range(repeats):
             if which == 0:
-                kernels._spring_forces(model, xp, forces)
+                springs._spring_forces(model, xp, forces)
             elif which == 1:
-                kernels._edge_repulsion_forces(model, xp, forces)
+                repulsion._edge_repulsion_forces(model, xp, forces)
             elif which == 2:
-                kernels._bending_forces(model, xp, control, forces)
+                bending._bending_forces(model, xp, control, forces)
             elif which == 3:
-                kernels._damping_forces(model, forces)
+                damping._damping_forces(model, forces)
             elif which == 4:
-                kernels._tissue_forces(model, xp, control, forces)
+                tissue._tissue_forces(model, xp, control, forces)
             elif which == 5:
-                kernels._muscle_forces(model, xp, control, work, forces)
+                muscle_forces._muscle_forces(model, xp, control, work, forces)
             elif which == 6:
                 solver._forces(model, xp, control, work, forces)
             elif which == 7:
@@ -619,7 +624,7 @@ def profile(repeats: int) -> tuple[str, dict]:
     """Per step, each term's kernel and the implicit step's parts, on happy at frame 12 of the
     default head and of the Hopper face (the thesis's model, implicit), and the conjugate
     gradients' iterations per step over the 35 frames."""
-    from facesim import kernels, solver
+    from facesim.physics import layout, rig_control, solver
 
     looped = _looped()
     columns, figures = {}, {}
@@ -631,22 +636,22 @@ def profile(repeats: int) -> tuple[str, dict]:
         factorised = median(timed(lambda: solver.rest_preconditioner(model, h), 3)) if factored else 0.0
         factor = model.preconditioner(h)
         table_ = activation_table(spec, model.muscles)
-        state = kernels.State(model.rest_position.copy(), np.zeros((n, 3)))
-        control = kernels.control(arrays, table_[0])
-        work, forces, xp = kernels.workspace(arrays), kernels.forces(arrays), np.empty((n, 3))
+        state = layout.State(model.rest_position.copy(), np.zeros((n, 3)))
+        control = rig_control.control(arrays, table_[0])
+        work, forces, xp = layout.workspace(arrays), layout.forces(arrays), np.empty((n, 3))
         krylov = solver.Krylov(*(np.empty((n, 3)) for _ in range(5)), np.empty(3 * n), factor)
         iterations = []
         for frame, row in enumerate(table_):
             control.activation[:] = row
-            kernels._rig_control(arrays, control)
+            rig_control._rig_control(arrays, control)
             for _ in range(model.material.substeps):
                 iterations.append(solver._implicit_step(arrays, state, control, h, xp, work, forces, krylov))
             if frame == 12:
                 snapshot = state.x.copy(), state.v.copy(), control.activation.copy()
         x, v, activation = snapshot
         control.activation[:] = activation
-        kernels._rig_control(arrays, control)
-        solver._predict(arrays, kernels.State(x.copy(), v.copy()), control, h, xp)
+        rig_control._rig_control(arrays, control)
+        solver._predict(arrays, layout.State(x.copy(), v.copy()), control, h, xp)
         solver._forces(arrays, xp, control, work, forces)
         solver._jacobi(arrays, forces, h, krylov.diagonal)
         krylov.r[:] = forces.force
@@ -688,7 +693,7 @@ script.
 - **Night (2026-12-03): the last two means of the issue's point 3, a cache-friendly
   vertex order and rendering overlapped with the simulation.**
   - A mesh of at least 4,000 vertices is simulated in a vertex order of its own
-    (facesim.model.reordered): reverse Cuthill-McKee on its edge graph
+    (facesim.physics.model.reordered): reverse Cuthill-McKee on its edge graph
     (scipy.sparse.csgraph), the springs, triangles and hinges sorted by their first vertex
     in it, each vertex's neighbours and ring in their sequence; positions, NPZ files and
     messages keep the mesh's numbering (tests/test_model.py, which also simulates the
@@ -722,7 +727,7 @@ script.
 - **Late evening (2026-12-03): a fresh `facesim render` 3.02 -> 2.63 s (medians of six
   alternating fresh processes, the commit before against after).** Four changes to what
   a fresh process does besides drawing, each measured:
-  - pyrender is imported without its on-screen viewer (facesim.render.offscreen_pyrender):
+  - pyrender is imported without its on-screen viewer (facesim.renderer.scene.offscreen_pyrender):
     its `__init__` imports the viewer and with it pyglet's windows and GL bindings,
     150-180 ms, for a window facesim never opens (pyrender imported after trimesh 251-317
     ms, without the viewer 96-157). A stand-in module takes the viewer's place during the
@@ -804,7 +809,7 @@ script.
   vectorising, and an array reached through a tuple is one it cannot prove apart). The
   thesis's update now gathers the ends and corners into rows first and then runs a loop
   that reads and writes rows alone, every array an argument of its own
-  (kernels._spring_tensions, kernels._repulsion_corners): LLVM vectorises it, 8 doubles
+  (springs._spring_tensions, repulsion._repulsion_corners): LLVM vectorises it, 8 doubles
   a lane ("vectorized loop (vectorization width: 8)"). Side by side in one process, one
   thread: at 27,614 vertices the springs 56 -> 41 ns a vertex and the edge repulsion
   168 -> 97 (the triangles' loop alone about 6 ns a triangle against 36 scalar); on the
@@ -853,7 +858,7 @@ script.
   (their loop 3.6, the scatter and the sum 24), the hypodermis 3-4.5, the prediction
   2. Profiled on the Xeon on 2026-12-02: the muscles 47 ns (frame 4.5,
   fills 11, pull 25), the edge repulsion 42, the springs 26. Changes of 2026-12-02: the
-  muscles' frame takes its atan2 without branches (facesim's own, kernels._atan2,
+  muscles' frame takes its atan2 without branches (facesim's own, numerics._atan2,
   NumPy's to 4e-15: 11 -> 4.5 ns a vertex), the back-projection tests each wedge by
   signs before dividing (69 -> 59 ns a region vertex), and a vertex's force and
   stiffness scatter side by side (36.0 -> 33.3 ns). Tried and not kept: the
@@ -894,7 +899,7 @@ script.
   sleeping instead of spinning between loops (`OMP_WAIT_POLICY=passive`) 1.5x, pinned
   to cores (`OMP_PROC_BIND`) no different. The springs, the edge repulsion, the
   bending, the muscles' flood fills (the muscles split by fixed slices,
-  kernels._find_regions) and each muscle's region loop run on every core for a mesh of
+  muscle_forces._find_regions) and each muscle's region loop run on every core for a mesh of
   at least 4,000 vertices (facesim.config.PARALLEL_FROM), scattering by fixed slices into
   buffers of their own so the bits do not depend on the thread count
   (tests/test_kernels.py). Profiled on the Xeon at 27,614 vertices: springs 1.77x,
@@ -931,7 +936,7 @@ script.
   too (the frames in flight above). The floor draws the same scene with the same renderer
   and antialiasing and uploads vertex arrays computed before the clock starts, one frame
   after another; facesim's per-frame work (profiled on the Xeon at 512², 22-24 ms a
-  frame: the skin carried from the simulated mesh, facesim.figure._followed, 0.9 ms looped
+  frame: the skin carried from the simulated mesh, facesim.face.figure._followed, 0.9 ms looped
   and 1.6 ms between draws, the normals 0.4-0.7 ms, the nine parts' vertex arrays written
   in place 0.3 ms, the uploads 0.2 ms, the edge filter 1.3 ms, which the floor also does)
   now runs beside llvmpipe's vertex work instead of after it.
@@ -945,7 +950,7 @@ script.
   with the encoder running beside it on the same two cores (x264 alone takes 0.2 s for
   the 35), the sends to it 0.1 s, its close 0.03 s and reading the file back 0.03-0.04
   s. What made it on the Xeon: antialiasing as a filter
-  on the frame as drawn (facesim.render._smooth_edges, the sub-pixel pass of FXAA),
+  on the frame as drawn (facesim.renderer.scene._smooth_edges, the sub-pixel pass of FXAA),
   where drawing four times the pixels cost 30 ms more a frame (against the 4-samples
   frame the filtered one is 44.3 dB, the unfiltered 41.5 dB; tests/test_head.py;
   `--supersample` keeps the 4 samples), and the head's opaque parts culling their back
@@ -1092,7 +1097,7 @@ def main() -> int:
             ("" if quick else "\n\n![cost per vertex-step](docs/scaling.png)"))
     text, order_figures = vertex_orders(1 if quick else 3, repeats)
     section("Vertex order", text + "\n\nA mesh of at least 4,000 vertices is simulated in an order of its own "
-            "(facesim.model.reordered): reverse Cuthill-McKee on its edge graph (scipy.sparse.csgraph), the springs, "
+            "(facesim.physics.model.reordered): reverse Cuthill-McKee on its edge graph (scipy.sparse.csgraph), the springs, "
             "triangles and hinges sorted by their first vertex in it; what a user sees (positions, NPZ, messages) "
             "stays in the mesh's numbering. The four models alternate, each the median of "
             f"{repeats} runs; the scaling table above is in facesim's order.")
@@ -1109,7 +1114,7 @@ def main() -> int:
             "renderer as soon as it is done; each drawn frame is encoded while the next one draws. A larger mesh's "
             "simulation wants every core and is run first: overlapped with the renderer on this machine's two cores "
             "it made the Hopper face subdivided twice render slower, not faster (891 ms simulated first against "
-            "1,271 overlapped, 2026-12-03; facesim.simulate.simulate). Wall time of "
+            "1,271 overlapped, 2026-12-03; facesim.animation.simulate.simulate). Wall time of "
             "writing the MP4, medians of the runs after the first, the two ways alternating in one process, "
             "renderer warm.")
 

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from facesim.errors import FacesimError
-from facesim.photo import mesh_from_photo
+from facesim.face.photo import mesh_from_photo
 
 ROOT = Path(__file__).resolve().parent.parent
 

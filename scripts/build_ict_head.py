@@ -99,8 +99,8 @@ def build(ict: Path, out: Path) -> None:
         raise SystemExit("shapes.npz's neutral does not match the OBJ's vertices")
     triangles, owner = fans(polygons)
     triangle_uv, _ = fans(polygon_uv)
-    from facesim.mesh import FaceMesh, load_mesh
-
+    from facesim.face.loading import load_mesh
+    from facesim.physics.mesh import FaceMesh
     face_triangles = triangles[material[owner] == names.index("M_Face")]
     hopper = load_mesh(ROOT / "meshes" / "face.obj")
     measured = np.load(ict / "mediapipe_landmarks_on_ict.npz")
@@ -159,8 +159,7 @@ def landmarks_on_head(face, mediapipe: np.ndarray, hopper) -> np.ndarray:
     measured it, the upper lips' and lids' landmarks on the upper sheet and the lower ones
     on the lower sheet, the left side the mirror image of the right (ICT's head is
     symmetric; MediaPipe's measurement is not quite)."""
-    from facesim.mesh import FaceMesh, mirror_map
-
+    from facesim.physics.mesh import FaceMesh, mirror_map
     x = face.vertices
     mask = FaceMesh(mediapipe, hopper.faces)
     loops = face.boundary_loops[1:]

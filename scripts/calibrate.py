@@ -1,9 +1,9 @@
 """Calibrate the default head's muscles against ICT FaceKit's scanned FACS shapes (issue 16).
 
-For each action unit, the muscles it drives (facesim.timeline.ACTION_UNITS) have their
+For each action unit, the muscles it drives (facesim.animation.timeline.ACTION_UNITS) have their
 force f (eq. 3.1), angular zone α (eq. 3.2) and radial falloff r, r_max (eq. 3.3)
 searched by Nelder-Mead, left and right together, so that the unit simulated alone at
-full intensity (facesim.calibration.hold) matches ICT's displacement at the simulated
+full intensity (facesim.animation.calibration.hold) matches ICT's displacement at the simulated
 vertices, carried over the head's face area, against ICT's shape there
 (``tests/data/ict_action_units.npz``) in direction and amplitude, with no
 inverted triangle and settling. The loss is
@@ -56,14 +56,15 @@ from scipy.optimize import minimize
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from facesim.calibration import FRAMES, compare, hold, on_face  # noqa: E402
+from facesim.animation.calibration import FRAMES, compare, hold, on_face  # noqa: E402
 from facesim.errors import InputError, SimulationError  # noqa: E402
-from facesim.simulate import figure_for  # noqa: E402
+from facesim.face.figure import figure_for  # noqa: E402
 from facesim.config import HEAD, HEAD_MUSCLES  # noqa: E402
-from facesim.mesh import load_face, mirror_map  # noqa: E402
-from facesim.model import Material, build_model  # noqa: E402
-from facesim.muscles import MuscleFile, resolve_muscles  # noqa: E402
-from facesim.timeline import ACTION_UNITS  # noqa: E402
+from facesim.face.loading import load_face  # noqa: E402
+from facesim.physics.mesh import mirror_map  # noqa: E402
+from facesim.face.material import MaterialSpec, face_model  # noqa: E402
+from facesim.face.muscle_file import MuscleFile, resolve_muscles  # noqa: E402
+from facesim.animation.timeline import ACTION_UNITS  # noqa: E402
 
 DATA = ROOT / "tests" / "data" / "ict_action_units.npz"
 #: Placement search: insertions among the vertices ICT moves most on the muscle's side,
@@ -78,7 +79,7 @@ BOUNDS = {"force": (10.0, 40000.0), "zone": (5.0, 120.0), "r": (0.2, 6.0), "spre
 class Calibration:
     """The head, its muscle file as a dict, and ICT's displacements at its landmarks."""
 
-    def __init__(self, material: Material = Material(), frames: int = FRAMES, pairs: tuple = (), also: tuple = ()):
+    def __init__(self, material: MaterialSpec = MaterialSpec(), frames: int = FRAMES, pairs: tuple = (), also: tuple = ()):
         #: how long each trial is held, the pairs of units whose settling joins the loss, and
         #: the units sharing the calibrated unit's muscles whose losses join it
         self.frames, self.pairs, self.also = frames, tuple(pairs), tuple(also)
@@ -140,7 +141,7 @@ class Calibration:
         return raw
 
     def model(self, raw: dict):
-        return build_model(self.mesh, resolve_muscles(MuscleFile.model_validate(raw), self.mesh), self.material)
+        return face_model(self.mesh, resolve_muscles(MuscleFile.model_validate(raw), self.mesh), self.material)
 
     def measure(self, raw: dict, au: str, model=None):
         """The unit held on the file ``raw`` (or on its ``model``, built already) against ICT's."""

@@ -36,7 +36,7 @@ def photos(out: Path) -> dict[str, Path]:
 def head_box(face, photo_shape, margin=1.6) -> tuple[slice, slice]:
     """A square around the fitted head's face in the photo, ``margin`` times its landmarks' extent."""
     from facesim.config import HEAD
-    from facesim.head import load_head
+    from facesim.face.head import load_head
 
     head = load_head(HEAD, list(face.identity))
     points = face.camera.project(head.landmark_positions)
@@ -61,12 +61,12 @@ def enlarged(image: np.ndarray, factor: int = 2) -> np.ndarray:
 
 def main() -> None:
     from facesim.cli import apex_frame
-    from facesim.own_face import face_from_photo, load_face_directory
-    from facesim.photo import read_image
-    from facesim.plots import contact_sheet
-    from facesim.render import FaceRenderer, RenderSettings
-    from facesim.simulate import simulate
-    from facesim.spec import Envelope, Spec, Track, load_spec
+    from facesim.face.own_face import face_from_photo, load_face_directory
+    from facesim.face.photo import read_image
+    from facesim.export.plots import contact_sheet
+    from facesim.renderer.scene import FaceRenderer, RenderSettings
+    from facesim.animation.simulate import simulate
+    from facesim.animation.spec import Envelope, Spec, Track, load_spec
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "faces")
@@ -104,7 +104,7 @@ def main() -> None:
     animation = simulate(spec)
     with FaceRenderer.of(animation, RenderSettings(photo.shape[1], photo.shape[0], onto=sources["astronaut"])) as renderer:
         frames = [enlarged(renderer.frame(animation, k)[box]) for k in range(animation.frames)]
-    from facesim.output import write_frames
+    from facesim.export.output import write_frames
 
     write_frames(frames, ROOT / "docs" / "animated_photo.gif", "gif", fps=25.0)
     print("wrote docs/animated_photo.gif")

@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from facesim.config import HEAD_MUSCLES, HOPPER_MESH  # noqa: E402
-from facesim.calibration import AMPLITUDE, COSINE, FACE_AREA, FRAMES, ICT_SHAPES, MOVES, ONSET, TOP, compare, ict_displacement  # noqa: E402
+from facesim.animation.calibration import AMPLITUDE, COSINE, FACE_AREA, FRAMES, ICT_SHAPES, MOVES, ONSET, TOP, compare, ict_displacement  # noqa: E402
 
 #: The compact calibration data the tests read (tests/data/README.md).
 CALIBRATION_DATA = ROOT / "tests" / "data" / "ict_action_units.npz"
@@ -62,8 +62,8 @@ def simulated(au: str, **face):
     fields: ``identity``, ``mesh``), eased in and held; None when facesim does not drive
     that unit."""
     import facesim
-    from facesim.spec import Spec
-    from facesim.timeline import ACTION_UNITS
+    from facesim.animation.spec import Spec
+    from facesim.animation.timeline import ACTION_UNITS
 
     if au not in ACTION_UNITS:
         return None
@@ -119,7 +119,7 @@ def write_calibration_data(shapes, path: Path) -> None:
     and over the whole face area (what the per-unit tests compare with, as this table
     does)."""
     from facesim.config import HEAD
-    from facesim.head import load_head
+    from facesim.face.head import load_head
 
     head = load_head(HEAD)
     units = list(ICT_SHAPES)
@@ -142,7 +142,7 @@ def main() -> int:
     if args.calibration_data:
         write_calibration_data(shapes, CALIBRATION_DATA)
         return 0
-    from facesim.render import FaceRenderer, RenderSettings
+    from facesim.renderer.scene import FaceRenderer, RenderSettings
 
     rows, passed, panels = [], 0, []
     renderer = crop = None

@@ -10,10 +10,11 @@ import pytest
 
 import facesim
 from facesim.config import DEFAULT_MESH, DEFAULT_MUSCLES
-from facesim.mesh import load_mesh
-from facesim.muscles import load_muscles
-from facesim.simulate import model_for, run
-from facesim.spec import activation_table
+from facesim.face.loading import load_mesh
+from facesim.face.muscle_file import load_muscles
+from facesim.animation.simulate import model_for
+from facesim.physics.run import run
+from facesim.animation.spec import activation_table
 
 ROOT = Path(__file__).resolve().parent.parent
 EXPRESSIONS = ROOT / "expressions"
@@ -57,9 +58,9 @@ def spec(name: str, **changes):
 
 def material(name: str = "happy", **changes):
     """A spec's material with fields replaced."""
-    from facesim.model import Material
+    from facesim.face.material import MaterialSpec
 
-    return Material.model_validate({**spec(name).material.model_dump(exclude_unset=True), **changes})
+    return MaterialSpec.model_validate({**spec(name).material.model_dump(exclude_unset=True), **changes})
 
 
 def held_apex(s, hold: int = 200):

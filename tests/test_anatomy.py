@@ -7,10 +7,10 @@ import yaml
 import facesim
 from conftest import EXPRESSIONS
 from facesim.errors import InputError
-from facesim.mesh import mirror_map
-from facesim.render import BACKGROUND, FaceRenderer, RenderSettings
-from facesim.simulate import run
-from facesim.spec import POSE, activation_table, load_spec, pose_table
+from facesim.physics.mesh import mirror_map
+from facesim.renderer.scene import BACKGROUND, FaceRenderer, RenderSettings
+from facesim.physics.run import run
+from facesim.animation.spec import POSE, activation_table, load_spec, pose_table
 
 LIP_PAIRS = [(13, 14), (82, 87), (81, 178), (80, 88)]
 LIDS = [(159, 145), (386, 374)]
@@ -210,10 +210,10 @@ def test_a_tied_rim_gives_between_a_pinned_and_a_free_one(tmp_path, mesh):
     """The brow raiser (AU2) moves the forehead's top edge as ICT's scans do only if the
     rim gives: pinned, it stays put (the crease at the mask's edge); tied (the default
     head's), it moves; free, it moves further, held by the hypodermis alone."""
-    from facesim.calibration import hold
+    from facesim.animation.calibration import hold
     from facesim.config import DEFAULT_MUSCLES
-    from facesim.simulate import model_for
-    from facesim.spec import Spec
+    from facesim.animation.simulate import model_for
+    from facesim.animation.spec import Spec
 
     rim = mesh.boundary_loops[0]
     forehead = rim[mesh.vertices[rim, 1] > np.percentile(mesh.vertices[:, 1], 80)]

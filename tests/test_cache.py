@@ -39,9 +39,9 @@ def test_an_unwritable_cache_only_costs_time(tmp_path, monkeypatch):
 
 
 def test_the_heads_skin_weights_read_from_the_cache_are_the_computed_ones(tmp_path, monkeypatch):
-    from facesim import figure
+    from facesim.face import figure
     from facesim.config import HEAD
-    from facesim.head import load_head
+    from facesim.face.head import load_head
 
     monkeypatch.setenv("FACESIM_CACHE", str(tmp_path))
     monkeypatch.setattr(figure, "_FOLLOW", {})
@@ -108,14 +108,12 @@ def test_a_name_keeps_its_latest_entries_and_nothing_else_is_touched(tmp_path, m
 
 
 def test_the_heads_preconditioner_read_from_the_cache_is_the_factorised_one(tmp_path, monkeypatch):
-    """A fresh process reads the implicit step's factor (facesim.model.Model.preconditioner)
+    """A fresh process reads the implicit step's factor (facesim.physics.model.Model.preconditioner)
     instead of factorising again: the same arrays; another step size, another entry."""
     from facesim.config import HEAD, HEAD_MUSCLES
-    from facesim.model import Material
-    from facesim.simulate import _model
-
+    from facesim.face.loading import load_face_model
     monkeypatch.setenv("FACESIM_CACHE", str(tmp_path))
-    model = _model(HEAD.resolve(), HEAD_MUSCLES.resolve(), Material())
+    model = load_face_model(HEAD.resolve(), HEAD_MUSCLES.resolve())
     h = 0.0371  # a step no other test factorises this model at in this process
     computed = model.preconditioner(h)
     assert len(list(tmp_path.glob("preconditioner-*.npz"))) == 1

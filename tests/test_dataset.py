@@ -47,9 +47,9 @@ def test_every_renderer_of_a_head_draws_the_same_pixels():
     memory addresses, and the blended eyelashes showed it: this draw (seed 7, sample 9)
     came out one of two ways, a pixel apart, from renderer to renderer."""
     from facesim.dataset import FRAMES, ONSET, available_action_units
-    from facesim.render import FaceRenderer, RenderSettings
-    from facesim.simulate import model_for, simulate
-    from facesim.spec import Spec
+    from facesim.renderer.scene import FaceRenderer, RenderSettings
+    from facesim.animation.simulate import model_for, simulate
+    from facesim.animation.spec import Spec
 
     draw = sample(7, 9, available_action_units(model_for(Spec(frames=FRAMES, onset=ONSET)).muscles.names))
     animation = simulate(Spec(frames=FRAMES, onset=ONSET, identity=draw["identity"], aus=draw["aus"]))

@@ -10,12 +10,12 @@ import pytest
 import yaml
 
 from conftest import spec
-from facesim.align import similarity
+from facesim.face.align import similarity
 from facesim.config import HEAD
 from facesim.errors import InputError
-from facesim.head import load_head
-from facesim.simulate import figure_for, model_for, simulate
-
+from facesim.face.head import load_head
+from facesim.animation.simulate import model_for, simulate
+from facesim.face.figure import figure_for
 pytestmark = pytest.mark.skipif(importlib.util.find_spec("mediapipe") is None,
                                 reason="MediaPipe not installed (pip install -e '.[photo]')")
 
@@ -36,8 +36,8 @@ def photos(tmp_path_factory):
 
 
 def fitted(path):
-    from facesim.fit import fit_head
-    from facesim.photo import detect_landmarks, read_image
+    from facesim.face.fit import fit_head
+    from facesim.face.photo import detect_landmarks, read_image
 
     image = read_image(path)
     return fit_head(load_head(HEAD), HEAD, detect_landmarks(image, str(path), refine=True), image.shape[1], image.shape[0], str(path))
@@ -55,7 +55,7 @@ def test_fitted_landmarks_fall_on_the_photos(photos, name):
 
 def render_head(identity, yaw=0.0, size=512):
     model = model_for(spec("happy").with_overrides(identity=identity))
-    from facesim.render import FaceRenderer, RenderSettings
+    from facesim.renderer.scene import FaceRenderer, RenderSettings
 
     with FaceRenderer(model.rest_position, model.faces, RenderSettings(size, size, framing="head"),
                       figure=figure_for(model)) as renderer:
@@ -72,7 +72,7 @@ def test_fit_recovers_a_known_head(tmp_path):
     within the issue's 0.2 cm RMS of the seed-7 head over the whole head (after a
     similarity), and nearer it than ICT's generic head is. Measured: 0.195 cm against the
     generic head's 0.264. It was 0.208 while the clay head had no eyebrows: MediaPipe then
-    guessed the brows' ten points on bare skin (facesim.figure.BROW_OUTLINES); over seeds
+    guessed the brows' ten points on bare skin (facesim.face.figure.BROW_OUTLINES); over seeds
     0-20 the mean went 0.377 -> 0.374 cm with the brows painted. The same fit to the exact
     landmarks reaches 0.158: what is left is MediaPipe's error on each face."""
     photo = tmp_path / "seed7.png"
@@ -91,9 +91,9 @@ def test_face_directory(tmp_path, photos):
     the photo's colours where the camera sees the face."""
     import trimesh
 
-    from facesim.fit import Camera
-    from facesim.own_face import FACE_FILES, face_from_photo, read_obj_vertices
-    from facesim.photo import read_image
+    from facesim.face.fit import Camera
+    from facesim.face.own_face import FACE_FILES, face_from_photo, read_obj_vertices
+    from facesim.face.photo import read_image
 
     out = tmp_path / "hopper"
     record = face_from_photo(photos["hopper"], out)
@@ -109,7 +109,7 @@ def test_face_directory(tmp_path, photos):
     assert isinstance(skin.visual, trimesh.visual.TextureVisuals) and skin.visual.material.image is not None
 
     # the nose tip's texel is the photo's pixel at the nose tip
-    from facesim.bake import atlas_uv
+    from facesim.face.bake import atlas_uv
 
     photo = read_image(photos["hopper"])
     texture = iio.imread(out / "head.png")
@@ -144,7 +144,7 @@ def test_a_face_turned_too_far_is_refused(tmp_path):
 def test_bad_photos_get_one_line_and_nothing_written(tmp_path, photos):
     from PIL import Image
 
-    from facesim.own_face import face_from_photo
+    from facesim.face.own_face import face_from_photo
 
     blank = tmp_path / "blank.png"
     iio.imwrite(blank, np.full((300, 300, 3), 200, dtype=np.uint8))
@@ -166,7 +166,7 @@ def test_bad_photos_get_one_line_and_nothing_written(tmp_path, photos):
 def test_several_faces_use_the_largest_and_say_so(tmp_path, photos):
     from PIL import Image
 
-    from facesim.photo import detect_landmarks, read_image
+    from facesim.face.photo import detect_landmarks, read_image
 
     big = Image.open(photos["hopper"]).convert("RGB")
     group = Image.new("RGB", (big.width * 2, big.height), (128, 128, 128))
@@ -201,7 +201,7 @@ def test_command_line(tmp_path, photos):
 @pytest.fixture(scope="module")
 def faces(tmp_path_factory, photos):
     """Both photos' face directories, made once for the module."""
-    from facesim.own_face import face_from_photo
+    from facesim.face.own_face import face_from_photo
 
     root = tmp_path_factory.mktemp("faces")
     for name in ("astronaut", "hopper"):
@@ -212,8 +212,8 @@ def faces(tmp_path_factory, photos):
 def onto_frames(face, photo, expression_or_spec, frames=()):
     """The chosen frames of an expression rendered through the face's fitted camera into its
     photo (the pipeline of `facesim render SPEC --face DIR --onto PHOTO`)."""
-    from facesim.photo import read_image
-    from facesim.render import FaceRenderer, RenderSettings
+    from facesim.face.photo import read_image
+    from facesim.renderer.scene import FaceRenderer, RenderSettings
 
     height, width = read_image(photo).shape[:2]
     animation = simulate(expression_or_spec.with_overrides(face=face))
@@ -223,7 +223,7 @@ def onto_frames(face, photo, expression_or_spec, frames=()):
 
 
 def face_box(photo):
-    from facesim.photo import detect_landmarks, read_image
+    from facesim.face.photo import detect_landmarks, read_image
 
     landmarks = detect_landmarks(read_image(photo), str(photo))[:, :2]
     (x0, y0), (x1, y1) = np.floor(landmarks.min(axis=0)).astype(int), np.ceil(landmarks.max(axis=0)).astype(int)
@@ -236,7 +236,7 @@ def test_the_neutral_head_through_the_photos_camera_is_the_photo(faces, photos, 
     box with a PSNR of at least 30 dB (measured: 34.2 dB on the astronaut, 34.1 on Hopper),
     and the expression's apex does not (the face moved), while away from the face the
     photo stays as it was."""
-    from facesim.photo import read_image
+    from facesim.face.photo import read_image
 
     photo = read_image(photos[name]).astype(float)
     neutral, apex = onto_frames(faces[name], photos[name], spec("happy"), frames=(0, 34))
@@ -263,8 +263,8 @@ def test_a_blink_closes_the_photos_eyes_and_an_open_mouth_shows_teeth(faces, pho
     (light, unsaturated pixels) where the photo had closed lips: the lower incisors' edge,
     measured 17 pixels (27 with the jaw's hinge in the head's coordinates, 2 mm from the
     contour points' axis used now)."""
-    from facesim.photo import detect_landmarks, read_image
-    from facesim.spec import Spec
+    from facesim.face.photo import detect_landmarks, read_image
+    from facesim.animation.spec import Spec
 
     photo = read_image(photos["hopper"])
     blink = Spec(name="blink", frames=20, onset=10, aus={"AU45": 1.0})
@@ -297,7 +297,7 @@ def test_the_photo_look_draws_the_baked_photo(faces, photos):
     """--look photo on the default camera: the nose tip's pixel takes the photo's colour
     there (the texture, unlit), --look clay facesim's skin; a face directory brings its
     identity (the fitted head's own shape)."""
-    from facesim.render import FaceRenderer, RenderSettings
+    from facesim.renderer.scene import FaceRenderer, RenderSettings
 
     animation = simulate(spec("happy").with_overrides(face=faces["hopper"]))
     record = yaml.safe_load((faces["hopper"] / "face.yaml").read_text())
@@ -307,8 +307,8 @@ def test_the_photo_look_draws_the_baked_photo(faces, photos):
         with FaceRenderer.of(animation, RenderSettings(256, 256, look=look)) as renderer:
             x, y = renderer.project(animation.model.mesh.head.vertices[[animation.model.mesh.head.landmarks[4]]])[0]
             looks[look] = renderer.render(animation.rest)[int(y) - 2:int(y) + 3, int(x) - 2:int(x) + 3].reshape(-1, 3).mean(axis=0)
-    from facesim.fit import Camera
-    from facesim.photo import read_image
+    from facesim.face.fit import Camera
+    from facesim.face.photo import read_image
 
     camera = Camera.from_dict(record["camera"], "face.yaml")
     head = animation.model.mesh.head
@@ -328,7 +328,7 @@ def test_face_options_and_their_errors(faces, photos, tmp_path):
     from typer.testing import CliRunner
 
     from facesim.cli import app
-    from facesim.photo import read_image
+    from facesim.face.photo import read_image
 
     runner = CliRunner()
     out = tmp_path / "frames"

@@ -7,10 +7,9 @@ import pytest
 
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
 from facesim.errors import InputError
-from facesim.mesh import load_mesh, mirror_map
-from facesim.muscles import load_muscles
-
-
+from facesim.face.loading import load_mesh
+from facesim.physics.mesh import mirror_map
+from facesim.face.muscle_file import load_muscles
 @pytest.fixture(scope="module")
 def mesh():
     """These tests are about the committed Hopper face (the default head simulates it)."""
@@ -77,7 +76,7 @@ def test_loading_a_missing_or_unreadable_mesh_is_one_line(tmp_path):
 
 @needs_mediapipe
 def test_make_mesh_rebuilds_the_committed_face(tmp_path):
-    from facesim.photo import mesh_from_photo
+    from facesim.face.photo import mesh_from_photo
     import matplotlib.cbook
 
     photo = matplotlib.cbook.get_sample_data("grace_hopper.jpg", asfileobj=False)
@@ -91,7 +90,7 @@ def test_make_mesh_rebuilds_the_committed_face(tmp_path):
 def test_a_photo_without_a_face_is_a_clear_error(tmp_path):
     import imageio.v3 as iio
 
-    from facesim.photo import mesh_from_photo
+    from facesim.face.photo import mesh_from_photo
 
     blank = tmp_path / "blank.png"
     iio.imwrite(blank, np.full((256, 256, 3), 200, dtype=np.uint8))
@@ -105,7 +104,7 @@ def test_a_second_photo_gives_a_valid_mesh_that_carries_the_default_muscles(tmp_
     import imageio.v3 as iio
     from skimage import data
 
-    from facesim.photo import mesh_from_photo
+    from facesim.face.photo import mesh_from_photo
 
     photo = tmp_path / "astronaut.png"
     iio.imwrite(photo, data.astronaut())
@@ -150,8 +149,8 @@ def test_mesh_info_on_the_default_face():
 
 
 def test_mesh_info_names_what_is_wrong(tmp_path, mesh):
-    from facesim.mesh import FaceMesh, write_obj
-
+    from facesim.face.loading import write_obj
+    from facesim.physics.mesh import FaceMesh
     cases = {
         "mm.obj": (FaceMesh(mesh.vertices * 10, mesh.faces), "wrong units?"),
         "flipped.obj": (FaceMesh(mesh.vertices, np.vstack([mesh.faces[:10, ::-1], mesh.faces[10:]])), "flipped"),

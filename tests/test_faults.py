@@ -18,8 +18,9 @@ import yaml
 
 from conftest import cpu_seconds, wait_for
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
-from facesim.mesh import load_mesh, obj_text, FaceMesh
-from facesim.writers import Terminated
+from facesim.face.loading import load_mesh, obj_text
+from facesim.physics.mesh import FaceMesh
+from facesim.files import Terminated
 from test_cli import SMALL, facesim, one_line_error, write_spec
 
 
@@ -253,7 +254,7 @@ def own_signal_handlers():
     """facesim's SIGTERM, SIGHUP and SIGINT handlers in this process (SIGINT's default
     handler set first, as in a terminal: a test worker may run with it ignored), the test
     runner's restored after."""
-    from facesim.writers import handling_termination, terminating_signal
+    from facesim.files import handling_termination, terminating_signal
 
     runner = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
@@ -278,7 +279,7 @@ def swallowing_library(then=None, signum=signal.SIGTERM):
 def test_a_signal_that_library_code_swallowed_still_leaves_nothing(tmp_path, own_signal_handlers, signum, raised):
     """CI once saw a render go on to write all 400 frames, exit 0, after its SIGTERM, and
     another all 3,000 after its Ctrl-C."""
-    from facesim.writers import atomic_path
+    from facesim.files import atomic_path
 
     with pytest.raises(raised):
         with atomic_path(tmp_path / "a.mp4") as tmp:

@@ -38,11 +38,12 @@ import numpy as np
 import pytest
 
 from conftest import spec
-from facesim.calibration import hold
+from facesim.animation.calibration import hold
 from facesim.config import LIBRARY
-from facesim.simulate import model_for, run
-from facesim.spec import Spec, activation_table
-from facesim.timeline import ACTION_UNITS
+from facesim.animation.simulate import model_for
+from facesim.physics.run import run
+from facesim.animation.spec import Spec, activation_table
+from facesim.animation.timeline import ACTION_UNITS
 
 HELD = 200
 SETTLED = 1e-6

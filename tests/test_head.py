@@ -12,9 +12,10 @@ import pytest
 from conftest import THESIS_EXPRESSIONS, spec
 from facesim.config import HEAD, HEAD_MUSCLES
 from facesim.errors import InputError
-from facesim.head import load_head
-from facesim.render import FaceRenderer, RenderSettings
-from facesim.simulate import figure_for, simulate
+from facesim.face.head import load_head
+from facesim.renderer.scene import FaceRenderer, RenderSettings
+from facesim.animation.simulate import simulate
+from facesim.face.figure import figure_for
 
 #: Vertex positions read off the upstream generic_neutral_mesh.obj (its v lines 1, 5000,
 #: 9409, 17040, 21452, 26719): face, face, last face vertex, first tooth, first sclera
@@ -68,7 +69,7 @@ def test_jaw_turns_the_lower_teeth_and_keeps_the_upper(head):
     teeth = head.part("teeth")
     lower = teeth[head.vertices[teeth, 1] < -4.0]  # only the lower row reaches below the upper
     upper = teeth[head.vertices[teeth, 1] > -1.5]
-    from facesim.figure import axis_rotation
+    from facesim.geometry import axis_rotation
 
     hinge, axis = figure.jaw_hinge, figure.jaw_axis
     expected = (head.vertices[lower] - hinge) @ axis_rotation(axis, angle).T + hinge
@@ -140,9 +141,9 @@ def test_the_lit_shader_draws_lines_as_pyrender_does():
     """Lines have no normals: the lit shader turns them to the camera, as pyrender's does,
     so --show-muscles draws its arrows red (with the normal left undefined they came out
     up to 14 levels off, and black once the lights' loop had a fixed length)."""
-    from facesim.output import arrows_for
+    from facesim.export.output import arrows_for
 
-    animation = simulate(spec("surprise"))
+    animation = simulate(spec("surprise"), with_muscle_forces=True)
     ours, theirs = _ours_and_pyrenders(animation, RenderSettings(128, 128, show_muscles=True), arrows_for(animation))
     assert ((ours[..., 0] > 150) & (ours[..., 1] < 80)).sum() > 20
     assert np.abs(ours - theirs).max() <= 1
@@ -152,7 +153,7 @@ def test_a_renderer_that_skips_unchanged_uniforms_draws_each_change_of_view(monk
     """facesim's programs set a uniform only when its value changes (render._remember_uniforms):
     turned, lit and posed frame after frame, a renderer draws what one that sets every
     uniform before every part (pyrender's way) draws, and every change shows."""
-    import facesim.render
+    import facesim.renderer.scene
 
     animation = simulate(spec("happy"))
     last = animation.frames - 1
@@ -180,9 +181,9 @@ def test_frames_drawn_two_in_flight_are_the_frames_drawn_one_by_one():
     wireframe with the muscles' arrows over it, and the animation held in one pose, come
     out byte for byte as ``frame`` draws them one after another, every frame in its
     place."""
-    from facesim.output import arrows_for
+    from facesim.export.output import arrows_for
 
-    animation = simulate(spec("look_left"))
+    animation = simulate(spec("look_left"), with_muscle_forces=True)
     assert animation.pose is not None
     for settings, arrows in ((RenderSettings(96, 96), None),
                              (RenderSettings(96, 96, wireframe=True, show_muscles=True), arrows_for(animation))):
@@ -222,7 +223,7 @@ def test_antialiasing_by_the_edge_filter_comes_toward_four_samples_per_pixel():
 
 @needs_mediapipe
 def test_mediapipe_finds_the_default_head_where_its_points_project():
-    from facesim.photo import detect_landmarks
+    from facesim.face.photo import detect_landmarks
 
     neutral = simulate(spec("happy", activations={}, frames=1))  # the default face, at rest
     head = neutral.model.mesh.head
@@ -262,7 +263,7 @@ def test_a_renderer_dropped_without_close_does_not_disturb_another():
     the garbage collector runs it whenever it likes: once in the middle of another
     renderer's frame, whose GL calls then failed (CI: glBindBuffer, invalid operation).
     Here the collector runs at every allocation while the dropped one is garbage."""
-    from facesim.spec import Spec
+    from facesim.animation.spec import Spec
 
     animation = simulate(Spec(frames=4, onset=1, aus={"AU12": 1.0}))
     dropped = FaceRenderer.of(animation, RenderSettings(64, 64))
@@ -284,7 +285,7 @@ def test_a_renderer_dropped_without_close_does_not_disturb_another():
 def test_closing_a_renderer_collects_no_garbage():
     """pyrender's delete ends with a full garbage collection, 0.1 s of every `facesim
     render` at its end: closing a renderer frees its GL objects and context without one."""
-    from facesim.spec import Spec
+    from facesim.animation.spec import Spec
 
     animation = simulate(Spec(frames=2, onset=1, aus={"AU12": 1.0}))
     renderer = FaceRenderer.of(animation, RenderSettings(32, 32))
@@ -307,7 +308,7 @@ def test_closing_a_renderer_collects_no_garbage():
 OFFSCREEN = """
 import sys
 import numpy as np
-from facesim.render import FaceRenderer, RenderSettings
+from facesim.renderer.scene import FaceRenderer, RenderSettings
 rest = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 with FaceRenderer(rest, np.array([[0, 1, 2]]), RenderSettings(32, 32)) as renderer:
     drawn = renderer.render(rest).std() > 0
@@ -333,7 +334,7 @@ def test_closing_one_renderer_leaves_another_drawing():
     """Every EGL renderer of a process shares one display, and pyrender terminated it when
     it deleted a renderer: closing one (`facesim sheet` nests a second face's renderer in
     the first's) ended the other's context."""
-    from facesim.spec import Spec
+    from facesim.animation.spec import Spec
 
     animation = simulate(Spec(frames=4, onset=1, aus={"AU12": 1.0}))
     with FaceRenderer.of(animation, RenderSettings(64, 64)) as kept:
@@ -352,7 +353,7 @@ def _brow_row(image: np.ndarray, column: int, rows: slice) -> int:
 
 
 def test_the_clay_head_has_eyebrows_that_ride_the_skin():
-    """A bald clay head's brows read only from their colour (facesim.figure._brow_colour):
+    """A bald clay head's brows read only from their colour (facesim.face.figure._brow_colour):
     they show darker than the forehead, and AU1 + AU2 raise them on the picture as far as
     the skin under them rises."""
     raised = simulate(spec("happy", activations={}, aus={"AU1": 1.0, "AU2": 1.0}))

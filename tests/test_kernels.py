@@ -8,13 +8,16 @@ import yaml
 
 import naive
 from conftest import material, spec
-from facesim import kernels as K, solver
+from facesim.physics import solver
+from facesim.physics import bending, checks, layout, muscle_forces, numerics, repulsion, rig_control, springs, tissue
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES, PARALLEL_FROM
-from facesim.mesh import load_mesh, subdivide, write_obj
-from facesim.muscles import MuscleFile, muscles_as_points
+from facesim.face.loading import load_mesh, write_obj
+from facesim.physics.mesh import subdivide
+from facesim.face.muscle_file import MuscleFile, muscles_as_points
 from facesim.schema import load_model
-from facesim.simulate import model_for, run
-from facesim.spec import activation_table
+from facesim.animation.simulate import model_for
+from facesim.physics.run import run
+from facesim.animation.spec import activation_table
 
 RTOL = 1e-9
 
@@ -35,8 +38,8 @@ def assert_close(actual, expected, rtol=RTOL):
 def test_springs_match_reference(model, rng, unit, implicit):
     x, xp = perturbed(model, rng)
     m = model.material
-    forces = K.forces(model.arrays)
-    K._spring_forces(model.arrays._replace(length_unit=unit, implicit=implicit), xp, forces)
+    forces = layout.forces(model.arrays)
+    springs._spring_forces(model.arrays._replace(length_unit=unit, implicit=implicit), xp, forces)
     # the thesis's Σ g (X_i - X_j*) at X = X* is the force at X*
     ref_stiff, ref_force = naive.spring_terms(xp, xp, model.spring_indices, model.spring_rest_length, m.stiffness,
                                               m.nonlinearity, unit)
@@ -49,8 +52,8 @@ def test_springs_match_reference(model, rng, unit, implicit):
 def test_edge_repulsion_matches_reference(model, rng, zeta, implicit):
     x, xp = perturbed(model, rng)
     k0 = model.material.stiffness
-    forces = K.forces(model.arrays)
-    K._edge_repulsion_forces(model.arrays._replace(repulsion_nonlinearity=zeta, length_unit=1.0, implicit=implicit), xp,
+    forces = layout.forces(model.arrays)
+    repulsion._edge_repulsion_forces(model.arrays._replace(repulsion_nonlinearity=zeta, length_unit=1.0, implicit=implicit), xp,
                              forces)
     ref_stiff, ref_force = naive.repulsion_terms(xp, xp, model.repulsion_vertex, model.repulsion_edge,
                                                  model.repulsion_rest_distance, k0, zeta)
@@ -59,17 +62,17 @@ def test_edge_repulsion_matches_reference(model, rng, zeta, implicit):
 
 
 def test_edge_repulsion_is_zero_at_rest(model):
-    forces = K.forces(model.arrays)
-    K._edge_repulsion_forces(model.arrays, model.rest_position.copy(), forces)
+    forces = layout.forces(model.arrays)
+    repulsion._edge_repulsion_forces(model.arrays, model.rest_position.copy(), forces)
     assert np.abs(forces.force).max() < 1e-9
 
 
 @pytest.mark.parametrize("kb", [0.0, 40.0])
 def test_bending_matches_reference(model, rng, kb):
     x, target = perturbed(model, rng, scale=0.05)
-    forces = K.forces(model.arrays)
-    control = K.control(model.arrays, np.zeros(len(model.muscles.names)))._replace(target=target)
-    K._bending_forces(model.arrays._replace(bending=kb), x, control, forces)
+    forces = layout.forces(model.arrays)
+    control = rig_control.control(model.arrays, np.zeros(len(model.muscles.names)))._replace(target=target)
+    bending._bending_forces(model.arrays._replace(bending=kb), x, control, forces)
     ref_stiff, ref_force = naive.bending_terms(x, target, model.hinge, model.hinge_weight, kb)
     assert_close(forces.stiffness, ref_stiff)
     assert_close(forces.force, ref_force)
@@ -88,7 +91,7 @@ def test_bending_stencil_measures_the_hinges_bend(model, rng):
     """Each hinge's stencil (model.bending_hinges) applied to positions is -√(3 / (A0 + A1))
     |e| (n0 + n1), n0 and n1 the unit normals to the shared edge in each triangle's
     plane, pointing to the opposite vertex: zero for a flat hinge, after any affine map."""
-    from facesim.model import COTANGENT_LIMIT, bending_hinges
+    from facesim.physics.model import COTANGENT_LIMIT, bending_hinges
 
     p = model.rest_position[model.hinge]  # (e, 4, 3)
     edge = p[:, 1] - p[:, 0]
@@ -123,19 +126,19 @@ def test_bending_is_zero_where_the_bones_hold_the_skin(model):
     activation = np.zeros(len(model.muscles.names))
     activation[model.muscle_count:] = 1.0
     for a in (np.zeros_like(activation), activation):
-        control = K.control(model.arrays, a)
-        forces = K.forces(model.arrays)
-        K._bending_forces(model.arrays._replace(bending=40.0), control.target.copy(), control, forces)
+        control = rig_control.control(model.arrays, a)
+        forces = layout.forces(model.arrays)
+        bending._bending_forces(model.arrays._replace(bending=40.0), control.target.copy(), control, forces)
         assert np.abs(forces.force).max() < 1e-9
 
 
 def test_tissue_matches_reference(model, rng):
     x, target = perturbed(model, rng)
     hold = rng.uniform(0, 1000, len(x)) * (rng.uniform(size=len(x)) > 0.8)
-    control = K.control(model.arrays, np.zeros(len(model.muscles.names)))._replace(target=target, hold=hold)
-    forces = K.forces(model.arrays)
+    control = rig_control.control(model.arrays, np.zeros(len(model.muscles.names)))._replace(target=target, hold=hold)
+    forces = layout.forces(model.arrays)
     assert model.tie.max() > 0  # the default head's rim is tied (muscles.Pinned)
-    K._tissue_forces(model.arrays._replace(tissue=300.0), x, control, forces)
+    tissue._tissue_forces(model.arrays._replace(tissue=300.0), x, control, forces)
     ref_stiff, ref_force = naive.tissue_terms(x, target, 300.0 + model.tie, hold)
     assert_close(forces.stiffness, ref_stiff)
     assert_close(forces.force, ref_force)
@@ -145,14 +148,14 @@ def test_uv_projection_matches_reference(model, rng):
     x, _ = perturbed(model, rng)
     assert model.material.uv_projection
     uv = np.empty_like(x)
-    K._muscle_frame(model.arrays, x, uv)
+    muscle_forces._muscle_frame(model.arrays, x, uv)
     assert_close(uv, naive.project_uv(x, model.axis_x, model.axis_z, model.radius))
 
 
 @numba.njit
 def _atan2_all(y, x, out):
     for i in range(y.shape[0]):
-        out[i] = K._atan2(y[i], x[i])
+        out[i] = numerics._atan2(y[i], x[i])
 
 
 def test_branch_free_arctangent_matches_numpy_in_every_octant_and_on_the_axes(rng):
@@ -174,11 +177,11 @@ def test_falloff_matches_reference_including_degenerate_points(rng):
     origin, insertion = np.array([0.0, 0.0, 0.0]), np.array([3.0, 1.0, 0.5])
     points = np.vstack([rng.uniform(-2, 6, (500, 3)), origin, insertion, 2 * insertion, -insertion])
     for cos_zone, r, r_max in [(np.cos(0.7), 3.2, 4.0), (np.cos(1.2), 2.0, 2.0 + 1e-9), (-1.0, 5.0, 6.0)]:
-        got = np.array([K._falloff(*origin, *insertion, *p, cos_zone, r, r_max) for p in points])
+        got = np.array([muscle_forces._falloff(*origin, *insertion, *p, cos_zone, r, r_max) for p in points])
         ref = naive.falloff(origin, insertion, points, cos_zone, r, r_max)
         assert_close(got, ref)
-    assert K._falloff(*origin, *insertion, *origin, 0.5, 3.0, 4.0) == 0.0
-    assert K._falloff(*origin, *insertion, *insertion, 0.5, np.linalg.norm(insertion), 4.0) == pytest.approx(1.0)
+    assert muscle_forces._falloff(*origin, *insertion, *origin, 0.5, 3.0, 4.0) == 0.0
+    assert muscle_forces._falloff(*origin, *insertion, *insertion, 0.5, np.linalg.norm(insertion), 4.0) == pytest.approx(1.0)
 
 
 def cross2(a, b):
@@ -190,11 +193,11 @@ def test_flood_fill_finds_the_brute_force_region(uv, rng):
     model = model_for(spec("happy", material=material(uv_projection=uv)))
     x, xp = perturbed(model, rng, scale=0.1)
     frame = naive.project_uv(xp, model.axis_x, model.axis_z, model.radius) if uv else xp
-    work = K.workspace(model.arrays)
+    work = layout.workspace(model.arrays)
     work.frame[:] = frame
     region, delta = work.region, work.delta
     for m in range(model.muscle_count):
-        count = K._region_of_influence(model.arrays, m, model.muscle_origin, model.muscle_insertion_point, work.frame, work)
+        count = muscle_forces._region_of_influence(model.arrays, m, model.muscle_origin, model.muscle_insertion_point, work.frame, work)
         ref_delta = naive.delta(model, m, frame)
         expected = naive.region_of_influence(ref_delta, model.muscle_insertion[m], model.spring_indices, model.vertex_count)
         assert count >= 3, model.muscles.names[m]
@@ -210,9 +213,9 @@ def test_muscle_forces_match_reference(uv, rng):
     # the head's pucker pushes its lips forward, its buccinator the lip corners in (muscles._Muscle.protrusion)
     assert model.muscle_protrusion.max() > 0 and model.muscle_protrusion.min() < 0
     activation[model.muscle_protrusion != 0] = 0.8
-    control = K.control(model.arrays, np.concatenate([activation, np.zeros(len(model.muscles.names) - len(activation))]))
-    forces = K.forces(model.arrays)
-    K._muscle_forces(model.arrays, xp, control, K.workspace(model.arrays), forces)
+    control = rig_control.control(model.arrays, np.concatenate([activation, np.zeros(len(model.muscles.names) - len(activation))]))
+    forces = layout.forces(model.arrays)
+    muscle_forces._muscle_forces(model.arrays, xp, control, layout.workspace(model.arrays), forces)
     force = forces.force
     expected = naive.muscle_forces(model, xp, activation)
     assert np.abs(expected).max() > 1.0
@@ -238,7 +241,7 @@ def test_back_projected_force_lies_in_its_triangle_and_keeps_its_2d_direction(mo
     for i in rng.choice(interior, 60, replace=False):
         angle = rng.uniform(0, 2 * np.pi)
         f2 = 3.0 * np.array([np.cos(angle), np.sin(angle)])
-        assert K._back_project(K._ring_fields(model.arrays), i, f2[0], f2[1], uv, x, f3)
+        assert muscle_forces._back_project(muscle_forces._ring_fields(model.arrays), i, f2[0], f2[1], uv, x, f3)
         assert np.linalg.norm(f3) == pytest.approx(3.0)
         for k in range(model.ring_start[i], model.ring_start[i + 1]):
             a, b = model.ring_a[k], model.ring_b[k]
@@ -265,7 +268,7 @@ def test_back_projection_of_a_force_leaving_the_mesh_keeps_its_component_along_t
     for i in mesh.boundary_loops[0][::6]:
         f2 = 2.0 * (uv[i] - centre) / np.linalg.norm(uv[i] - centre)  # outward: no triangle holds it
         f3 = np.empty(3)
-        found = K._back_project(K._ring_fields(model.arrays), i, f2[0], f2[1], uv, model.rest_position, f3)
+        found = muscle_forces._back_project(muscle_forces._ring_fields(model.arrays), i, f2[0], f2[1], uv, model.rest_position, f3)
         expected = naive.back_project(i, f2, uv, model.rest_position, model.faces, model.spring_indices)
         assert found == bool(np.any(expected))
         assert_close(f3, expected)
@@ -287,10 +290,10 @@ def test_step_matches_reference(switches, bones, rng):
     if bones == "moved":
         activation[model.muscle_count:] = rng.uniform(0.3, 1, len(activation) - model.muscle_count)
     ref_x, ref_v = naive.step(model, x, v, activation, 0.0025)
-    state = K.State(x.copy(), v.copy())
+    state = layout.State(x.copy(), v.copy())
     n = model.vertex_count
-    solver._quasi_implicit_step(model.arrays, state, K.control(model.arrays, activation), 0.0025, np.empty_like(x),
-                                K.workspace(model.arrays), K.forces(model.arrays))
+    solver._quasi_implicit_step(model.arrays, state, rig_control.control(model.arrays, activation), 0.0025, np.empty_like(x),
+                                layout.workspace(model.arrays), layout.forces(model.arrays))
     assert_close(state.v, ref_v)
     assert_close(state.x, ref_x)
 
@@ -302,7 +305,7 @@ def test_rig_targets_match_reference(name, rng):
     for _ in range(3):
         activation = np.zeros(len(model.muscles.names))
         activation[model.muscle_count:] = rng.uniform(0, 1, len(activation) - model.muscle_count)
-        control = K.control(model.arrays, activation)
+        control = rig_control.control(model.arrays, activation)
         target, hold = naive.rig_targets(model, activation)
         assert np.abs(target - model.rest_position).max() > 0.1
         assert_close(control.target, target)
@@ -328,7 +331,7 @@ def test_whole_run_matches_reference(name):
 def test_a_triangle_is_inverted_when_folded_against_the_skin_around_it_not_when_turned_as_a_whole(model):
     def inverted(x):
         x = np.ascontiguousarray(x)
-        return K._triangle_checks(x, model.faces, model.rest_normal, model.rest_area, model.rest_against,
+        return checks._triangle_checks(x, model.faces, model.rest_normal, model.rest_area, model.rest_against,
                                   np.empty_like(x))[0]
 
     rest = model.rest_position
@@ -347,7 +350,7 @@ def test_a_triangle_is_inverted_when_folded_against_the_skin_around_it_not_when_
 def test_non_finite_values_are_found_under_fastmath(bad):
     """`fastmath` lets the compiler drop math.isfinite (an @njit(fastmath=True) isfinite
     finds no NaN in [1, nan, inf]); the kernels' check reads the exponent bits instead."""
-    from facesim.kernels import _not_finite
+    from facesim.physics.numerics import _not_finite
 
     rows = np.arange(30.0).reshape(10, 3)
     assert _not_finite(rows) == -1
@@ -373,15 +376,15 @@ def test_links_are_the_jacobian_of_the_springs_tissue_and_bending(model, rng):
     arrays = model.arrays._replace(edge_repulsion=False, bending=40.0)
     centre = model.rest_position.mean(axis=0)
     x = centre + 1.08 * (model.rest_position - centre) + 0.002 * rng.standard_normal(model.rest_position.shape)
-    control = K.control(arrays, np.zeros(len(model.muscles.names)))
-    forces = K.forces(arrays)
+    control = rig_control.control(arrays, np.zeros(len(model.muscles.names)))
+    forces = layout.forces(arrays)
 
     def force(at):
         forces.force[:] = 0.0
         forces.diagonal[:] = 0.0
-        K._spring_forces(arrays, np.ascontiguousarray(at), forces)
-        K._tissue_forces(arrays, np.ascontiguousarray(at), control, forces)
-        K._bending_forces(arrays, np.ascontiguousarray(at), control, forces)
+        springs._spring_forces(arrays, np.ascontiguousarray(at), forces)
+        tissue._tissue_forces(arrays, np.ascontiguousarray(at), control, forces)
+        bending._bending_forces(arrays, np.ascontiguousarray(at), control, forces)
         return forces.force.copy()
 
     p = rng.standard_normal(x.shape)
@@ -412,9 +415,9 @@ def test_implicit_step_solves_its_system(rng, bending, face):
     v[model.pinned] = 0
     activation = np.zeros(len(model.muscles.names))
     activation[:model.muscle_count] = rng.uniform(0.2, 1, model.muscle_count)
-    control = K.control(model.arrays, activation)
+    control = rig_control.control(model.arrays, activation)
     h, n = 0.01, model.vertex_count
-    state, work, forces = K.State(x.copy(), v.copy()), K.workspace(model.arrays), K.forces(model.arrays)
+    state, work, forces = layout.State(x.copy(), v.copy()), layout.workspace(model.arrays), layout.forces(model.arrays)
     krylov = solver.Krylov(*(np.empty_like(x) for _ in range(5)), np.empty(3 * n), model.preconditioner(h))
     assert (krylov.factor.lower_start.size > 1) == (bending > 0)
     iterations = solver._implicit_step(model.arrays, state, control, h, np.empty_like(x), work, forces, krylov)
@@ -422,7 +425,7 @@ def test_implicit_step_solves_its_system(rng, bending, face):
 
     # the terms at the same prediction, then the system solved densely
     xp = np.empty_like(x)
-    solver._predict(model.arrays, K.State(x.copy(), v.copy()), control, h, xp)
+    solver._predict(model.arrays, layout.State(x.copy(), v.copy()), control, h, xp)
     solver._forces(model.arrays, xp, control, work, forces)
     free = np.repeat(~model.pinned, 3)
     m = model.material.mass
@@ -451,7 +454,7 @@ def test_back_projection_turns_continuously_with_the_force(model):
     def turned(i, angles):
         out = []
         for angle in angles:
-            K._back_project(K._ring_fields(model.arrays), i, np.cos(angle), np.sin(angle), uv, model.rest_position, f3)
+            muscle_forces._back_project(muscle_forces._ring_fields(model.arrays), i, np.cos(angle), np.sin(angle), uv, model.rest_position, f3)
             out.append(f3.copy())
         return np.linalg.norm(np.diff(out, axis=0), axis=1)
 
@@ -475,17 +478,17 @@ def test_muscle_regions_kept_between_steps_follow_the_bones(rng):
     _, xp = perturbed(model, rng, scale=0.05)
     activation = np.zeros(len(model.muscles.names))
     activation[:model.muscle_count] = rng.uniform(0.2, 1, model.muscle_count)
-    work = K.workspace(arrays)
+    work = layout.workspace(arrays)
     for bones in (0.0, 0.8, 0.3):
         activation[model.muscle_count:] = bones
-        control = K.control(arrays, activation)
-        kept, fresh = K.forces(arrays), K.forces(arrays)
-        K._muscle_forces(arrays, xp, control, work, kept)
+        control = rig_control.control(arrays, activation)
+        kept, fresh = layout.forces(arrays), layout.forces(arrays)
+        muscle_forces._muscle_forces(arrays, xp, control, work, kept)
         assert (work.region_count >= 0).all() and work.region_count.sum() > 100
-        K._muscle_forces(arrays, xp, control, K.workspace(arrays), fresh)
+        muscle_forces._muscle_forces(arrays, xp, control, layout.workspace(arrays), fresh)
         assert_close(kept.force, fresh.force)
         stamps = work.stamp.copy()
-        K._muscle_forces(arrays, xp, control, work, kept)
+        muscle_forces._muscle_forces(arrays, xp, control, work, kept)
         assert np.array_equal(work.stamp, stamps)  # no flood fill: every region was kept
 
 

@@ -1,17 +1,18 @@
-"""The model's cache-friendly vertex order (facesim.model.reordered): a large mesh is
+"""The model's cache-friendly vertex order (facesim.physics.model.reordered): a large mesh is
 simulated in an order of its own, and everything a user sees stays in the mesh's."""
 
 import numpy as np
 import pytest
 
-import facesim.model as model_module
+import facesim.physics.model as model_module
 from conftest import material, spec
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
-from facesim.kernels import ModelArrays
-from facesim.mesh import load_face
-from facesim.muscles import load_muscles
-from facesim.simulate import muscle_forces, run
-from facesim.spec import activation_table
+from facesim.face.material import face_model
+from facesim.physics.layout import ModelArrays
+from facesim.face.loading import load_face
+from facesim.face.muscle_file import load_muscles
+from facesim.physics.run import muscle_forces, run
+from facesim.animation.spec import activation_table
 
 
 def test_every_field_of_the_kernels_arrays_is_carried_to_a_new_order_one_way():
@@ -30,8 +31,8 @@ def hopper():
 def both_orders(hopper, material_):
     """The Hopper face's model in its own order, and in its cache order (which only a
     larger mesh takes by default)."""
-    own = model_module.build_model(*hopper, material_)
-    reordered = model_module.build_model(*hopper, material_, reorder=True)
+    own = face_model(*hopper, material_)
+    reordered = face_model(*hopper, material_, reorder=True)
     assert own.vertex_order is None and reordered.vertex_order is not None
     assert not np.array_equal(reordered.vertex_order, np.arange(own.vertex_count))
     return own, reordered
@@ -77,8 +78,7 @@ def test_a_face_simulated_in_cache_order_moves_as_in_its_own(hopper, name, prese
 
 
 def test_a_face_in_cache_order_simulated_frame_by_frame_in_the_background_gives_the_same_frames(hopper):
-    from facesim.simulate import Progress
-
+    from facesim.physics.run import Progress
     s = spec("happy", frames=12)
     _, reordered = both_orders(hopper, s.material)
     table = activation_table(s, reordered.muscles)

@@ -7,9 +7,9 @@ import yaml
 from conftest import EXPRESSIONS
 from facesim.config import DEFAULT_MUSCLES, HOPPER_MESH, HOPPER_MUSCLES
 from facesim.errors import InputError
-from facesim.mesh import load_mesh
-from facesim.muscles import LINEAR, load_muscles
-
+from facesim.face.loading import load_mesh
+from facesim.face.muscle_file import load_muscles
+from facesim.physics.muscles import LINEAR
 THESIS_MUSCLES = [
     "frontalis_medial", "frontalis_lateral", "frontalis_outer", "corrugator_supercilii",
     "levator_labii_superioris", "levator_labii_superioris_alaeque_nasi", "zygomaticus_major",
@@ -149,16 +149,15 @@ def test_a_muscle_file_brings_the_material_its_forces_were_set_on_and_a_spec_win
     bad field in the file is one line naming the file."""
     import facesim
     from facesim.config import HOPPER_MESH
-    from facesim.model import Material
-    from facesim.simulate import model_for
-
+    from facesim.face.material import MaterialSpec
+    from facesim.animation.simulate import model_for
     spec = facesim.load_spec(EXPRESSIONS / "happy.yaml").with_overrides(mesh=HOPPER_MESH)
     model = model_for(spec)
     assert (model.material.bending, model.material.regions) == (0.0, "moving")
-    mine = model_for(spec.with_overrides(material=Material(bending=20.0)))
+    mine = model_for(spec.with_overrides(material=MaterialSpec(bending=20.0)))
     assert (mine.material.bending, mine.material.regions) == (20.0, "moving")
     head = model_for(facesim.load_spec(EXPRESSIONS / "happy.yaml"))
-    assert (head.material.bending, head.material.regions) == (Material().bending, "attached")
+    assert (head.material.bending, head.material.regions) == (MaterialSpec().bending, "attached")
     path = write_muscles(tmp_path, lambda d: d.update(material={"bending": -1}))
     with pytest.raises(InputError, match=r"bad.muscles.yaml: material -> bending: Input should be greater than or equal to 0"):
         load_muscles(path, load_mesh(HOPPER_MESH))

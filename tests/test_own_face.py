@@ -1,19 +1,22 @@
 """Any face mesh: the material scaled to the mesh's resolution, muscles carried by position,
 and meshes aligned to the default face from named landmarks."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import yaml
 
 import facesim
-from facesim.simulate import model_for
 from conftest import EXPRESSIONS
+from facesim.animation.simulate import model_for
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
-from facesim.mesh import load_mesh, subdivide, write_obj
-from facesim.model import Material, over_muscle_file
-from facesim.muscles import MuscleFile, muscles_as_points
+from facesim.face.loading import load_mesh, write_obj
+from facesim.physics.mesh import subdivide
+from facesim.face.material import MaterialSpec, over_muscle_file
+from facesim.face.muscle_file import MuscleFile, muscles_as_points
 from facesim.schema import load_model
-from facesim.spec import load_spec
+from facesim.animation.spec import load_spec
 from conftest import THESIS_EXPRESSIONS
 from test_simulation import assert_expression_reads
 
@@ -38,13 +41,13 @@ def on(spec, mesh_and_muscles):
 def test_the_material_scales_with_the_skin_area_per_vertex(subdivided):
     spec = load_spec(EXPRESSIONS / "sad.yaml").with_overrides(mesh=HOPPER_MESH)
     default = model_for(spec)
-    assert default.resolution == 1.0 and default.material == over_muscle_file(spec.material, default.muscles).model_copy(update=dict(substeps=1))
+    assert default.resolution == 1.0 and default.material == replace(over_muscle_file(spec.material, default.muscles), substeps=1)
     fine = model_for(on(spec, subdivided))
     assert fine.vertex_count == 1790 and 0.2 < fine.resolution < 0.3
     s = fine.resolution
     assert fine.material.mass == pytest.approx(s) and fine.material.tissue == pytest.approx(300 * s)
     assert fine.material.substeps == 2 and fine.length_unit == pytest.approx(np.sqrt(s))
-    thesis = Material(preset="thesis")
+    thesis = MaterialSpec(preset="thesis")
     assert model_for(on(spec.with_overrides(material=thesis), subdivided)).material.substeps == 8
     assert fine.muscle_force.sum() == pytest.approx(s * default.muscle_force.sum())
 
@@ -57,7 +60,7 @@ def astronaut(tmp_path_factory):
     import imageio.v3 as iio
     from skimage import data
 
-    from facesim.photo import mesh_from_photo
+    from facesim.face.photo import mesh_from_photo
 
     root = tmp_path_factory.mktemp("astronaut")
     iio.imwrite(root / "astronaut.png", data.astronaut())
@@ -101,10 +104,9 @@ def turned(points, degrees_yaw=25.0, degrees_pitch=10.0, scale=10.0, shift=(3.0,
 
 
 def test_align_brings_a_turned_scan_in_millimetres_into_the_face_frame(tmp_path, subdivided):
-    from facesim.align import NAMED_LANDMARKS
-    from facesim.mesh import FaceMesh
+    from facesim.face.align import NAMED_LANDMARKS
+    from facesim.physics.mesh import FaceMesh
     from test_cli import facesim as cli
-
     fine = load_mesh(subdivided[0])
     scan = tmp_path / "scan.obj"
     write_obj(scan, FaceMesh(turned(fine.vertices), fine.faces))
@@ -114,8 +116,7 @@ def test_align_brings_a_turned_scan_in_millimetres_into_the_face_frame(tmp_path,
     aligned = load_mesh(tmp_path / "aligned.obj")
     assert np.abs(aligned.vertices - fine.vertices).max() < 0.1  # back in cm, upright, facing +z
     carried = load_model(tmp_path / "aligned.muscles.yaml", MuscleFile)
-    from facesim.muscles import resolve_muscles
-
+    from facesim.face.muscle_file import resolve_muscles
     on_aligned = resolve_muscles(carried, aligned)
     on_fine = resolve_muscles(load_model(subdivided[1], MuscleFile), fine)
     assert np.array_equal(on_aligned.attachment, on_fine.attachment)
@@ -123,9 +124,8 @@ def test_align_brings_a_turned_scan_in_millimetres_into_the_face_frame(tmp_path,
 
 
 def test_landmarks_are_proposed_by_nearest_vertex_on_an_upright_mesh(tmp_path, subdivided):
-    from facesim.align import NAMED_LANDMARKS, propose_landmarks
-    from facesim.mesh import FaceMesh
-
+    from facesim.face.align import NAMED_LANDMARKS, propose_landmarks
+    from facesim.physics.mesh import FaceMesh
     fine = load_mesh(subdivided[0])
     scan = FaceMesh(turned(fine.vertices, 0.0, 0.0), fine.faces)  # millimetres, moved, but upright
     proposal = propose_landmarks(scan, load_mesh(HOPPER_MESH))

@@ -2,7 +2,7 @@
 
 Every unit of ICT's FACS table that anatomy lets a face drive is simulated alone at full
 intensity on the default head and held, and its displacement at the simulated vertices is
-carried over the head's face area as the head shows it (facesim.calibration.on_face) and
+carried over the head's face area as the head shows it (facesim.animation.calibration.on_face) and
 compared there with ICT's own shape, vertex for vertex, as REALISM.md does
 (``tests/data/ict_action_units.npz``, provenance in its README):
 direction (cosine at least 0.8) and amplitude (norm ratio 0.75-1.33), no inverted
@@ -16,12 +16,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from facesim.calibration import AMPLITUDE, COSINE, ICT_SHAPES, compare, hold, on_face
+from facesim.animation.calibration import AMPLITUDE, COSINE, ICT_SHAPES, compare, hold, on_face
 from facesim.config import HEAD
-from facesim.head import load_head
-from facesim.simulate import figure_for, model_for
-from facesim.spec import Spec
-from facesim.timeline import ACTION_UNITS
+from facesim.face.head import load_head
+from facesim.face.material import face_model
+from facesim.animation.simulate import model_for
+from facesim.face.figure import figure_for
+from facesim.animation.spec import Spec
+from facesim.animation.timeline import ACTION_UNITS
 
 DATA = Path(__file__).parent / "data" / "ict_action_units.npz"
 #: Units within the bounds on the default head (REALISM.md).
@@ -71,14 +73,12 @@ def head_file_and_model_with(head_model, change):
     import yaml
 
     from facesim.config import HEAD_MUSCLES
-    from facesim.model import build_model
-    from facesim.muscles import MuscleFile, resolve_muscles
-
+    from facesim.face.muscle_file import MuscleFile, resolve_muscles
     raw = yaml.safe_load(HEAD_MUSCLES.read_text())
     changed = copy.deepcopy(raw)
     change(changed)
     material = Spec.model_validate(dict(name="neutral", frames=1)).material
-    return raw, build_model(head_model.mesh, resolve_muscles(MuscleFile.model_validate(changed), head_model.mesh), material)
+    return raw, face_model(head_model.mesh, resolve_muscles(MuscleFile.model_validate(changed), head_model.mesh), material)
 
 
 @pytest.mark.parametrize("au, muscle", [("AU18", "incisivus_labii"), ("AU14", "buccinator")])

@@ -8,9 +8,11 @@ import facesim
 from conftest import THESIS_EXPRESSIONS, material, spec
 from facesim.errors import SimulationError
 from facesim.config import HOPPER_MESH
-from facesim.mesh import load_mesh, mirror_map
-from facesim.simulate import model_for, run
-from facesim.spec import activation_table
+from facesim.face.loading import load_mesh
+from facesim.physics.mesh import mirror_map
+from facesim.animation.simulate import model_for
+from facesim.physics.run import run
+from facesim.animation.spec import activation_table
 
 MOUTH_CORNERS = (61, 291)
 BROWS = (105, 334, 70, 300)
@@ -222,7 +224,7 @@ def test_without_a_thread_safe_numba_layer_the_simulation_runs_before_the_frames
 
 def test_a_mesh_simulated_on_every_core_is_simulated_before_its_frames_are_drawn(monkeypatch):
     """Its simulation wants both cores, which the renderer already keeps busy: overlapped, a
-    6,990-vertex face rendered slower, not faster (facesim.simulate.simulate)."""
+    6,990-vertex face rendered slower, not faster (facesim.animation.simulate.simulate)."""
     import sys
 
     simulate_module = sys.modules["facesim.simulate"]  # the module: facesim.simulate is the function

@@ -30,8 +30,8 @@ ANCHOR = "    kernels._muscle_forces(model, xp, control, work, forces)  # eq. 3.
 SAG = textwrap.dedent("""
     import numpy as np
     from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
-    from facesim.simulate import simulate
-    from facesim.spec import load_spec
+    from facesim.animation.simulate import simulate
+    from facesim.animation.spec import load_spec
     spec = load_spec("{spec}").with_overrides(mesh=HOPPER_MESH, muscles=HOPPER_MUSCLES)
     animation = simulate(spec)
     free = ~animation.model.pinned
@@ -87,7 +87,7 @@ def test_one_implicit_step_per_frame_holds_each_expression_where_small_steps_do(
     """The default step (one per frame) against the same model at eight steps per frame
     with conjugate gradients run to 1e-8: the held apex within 2% of the largest
     displacement. The thesis's per-vertex update cannot be the reference here: the skin's
-    bending couples four vertices per hinge, which it cannot carry (facesim.model.Material);
+    bending couples four vertices per hinge, which it cannot carry (facesim.physics.model.Material);
     it is checked against the thesis's equations in tests/test_kernels.py instead."""
     model, reference, folded = held_apex(spec(name, material=material(name, substeps=8, tolerance=1e-8, iterations=2000)))
     implicit_model, implicit, implicit_folded = held_apex(spec(name))
@@ -104,8 +104,9 @@ def test_the_thesis_preset_is_the_thesis_model(tmp_path):
     Happy in it, on the Hopper face, moves the face and folds nothing."""
     import facesim
     from facesim.config import HOPPER_MESH
-    from facesim.simulate import model_for, run
-    from facesim.spec import activation_table
+    from facesim.animation.simulate import model_for
+    from facesim.physics.run import run
+    from facesim.animation.spec import activation_table
 
     path = tmp_path / "thesis_happy.yaml"
     path.write_text((PROJECT_DIR / "expressions" / "happy.yaml").read_text()

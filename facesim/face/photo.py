@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .mesh import FaceMesh, fit_vertical_axis, mirror_map, triangle_normals
+from ..errors import InputError
+from ..physics.mesh import FaceMesh, fit_vertical_axis, mirror_map, triangle_normals
 
 #: Outer eye corners (exocanthion) and their reference distance in cm.
 EYE_CORNERS = (33, 263)
@@ -241,8 +241,7 @@ def read_image(path: str | Path) -> np.ndarray:
 
 def mesh_from_photo(photo: str | Path, output: str | Path, symmetric: bool = True, replace: bool = True) -> FaceMesh:
     """Build a mesh from a photo file and write it as OBJ."""
-    from .mesh import write_obj
-
+    from .loading import write_obj
     try:
         import mediapipe  # noqa: F401
     except ImportError:

@@ -120,7 +120,8 @@ def hold(model, au: str | tuple[str, ...], intensity: float = 1.0, frames: int =
     (facesim.model.Model), eased in and held. ``figure``: the head it drives (default:
     built for the model); a caller trying many muscle files on one head passes the one it
     built, whose follow they all share."""
-    from .simulate import figure_for, run
+    from ..physics.run import run
+    from ..face.figure import figure_for
     from .spec import Spec, activation_table
 
     units = (au,) if isinstance(au, str) else au

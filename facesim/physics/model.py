@@ -32,84 +32,21 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Literal
 
 import numpy as np
-from pydantic import Field, model_validator
 
-from .cache import cached_arrays, key
-from .config import CODE_DIGEST
-from .errors import InputError
-from .kernels import ModelArrays
+from ..cache import cached_arrays, key
+from ..config import CODE_DIGEST
+from ..errors import InputError
+from .layout import ModelArrays
+from .material import Material, resolved_material
 from .mesh import FaceMesh, csr_from_pairs, inverse_permutation
-from .muscles import SPHINCTER, MuscleSet
+from .muscles import MuscleSet, SPHINCTER
 from .rig import Rig, build_rig
-from .schema import Strict
 
 #: The default face's skin area per vertex (cm²): meshes/face.obj's 276.05 cm² over 468
 #: vertices. A mesh's resolution scale s is its own area per vertex over this.
 REFERENCE_VERTEX_AREA = 0.5898477858884484
-
-
-#: Steps per frame by default, per solver: the implicit step is stable at one (issue 15's
-#: apex test against the quasi-implicit); the thesis's update needs four on the default face.
-SUBSTEPS = {"implicit": 1, "quasi-implicit": 4}
-
-
-#: Material presets: the fields a preset sets where a spec leaves them out. ``thesis``
-#: reproduces the thesis's model for its tables in BENCHMARKS.md: its update, eq.
-#: 3.14-3.20, at four steps per frame, and no bending. The hypodermis stays: without it
-#: the thesis's update folds happy at Table 3.3's longest step (Δt = 0.015 s; measured).
-#: ``facesim`` is the defaults below.
-PRESETS = {
-    "facesim": {},
-    "thesis": dict(solver="quasi-implicit", bending=0.0, regions="moving"),
-}
-
-
-class Material(Strict):
-    """Mass-spring-damper parameters (thesis section 3.1.3). ``preset`` fills the fields
-    a spec does not give (``PRESETS``); fields given win."""
-
-    preset: Literal["facesim", "thesis"] = Field("facesim", description="facesim: the defaults below; thesis: the "
-                                                 "thesis's model (quasi-implicit update, no bending, regions at the moving skin)")
-    mass: float = Field(1.0, gt=0, description="point mass m of every vertex")
-    stiffness: float = Field(1000.0, gt=0, description="spring stiffness k0, eq. 3.6 and 3.7")
-    nonlinearity: float = Field(5.0, ge=0, description="spring non-linearity γ, eq. 3.6")
-    repulsion_nonlinearity: float = Field(5.0, ge=0, description="edge-repulsion non-linearity ζ, eq. 3.7")
-    damping: float = Field(40.0, ge=0, description="viscous damping c, eq. 3.10")
-    tissue: float = Field(300.0, ge=0, description="hypodermis springs tying skin to bone (not in the thesis, where it is 0)")
-    drive: float = Field(20000.0, ge=0, description="stiffness driving the lips and lid contours to the targets of the jaw and eyelids (facesim.rig)")
-    solver: Literal["implicit", "quasi-implicit"] = Field(
-        "implicit", description="implicit: the linearised backward-Euler step with the whole stiffness, solved by "
-        "conjugate gradients (facesim.solver); quasi-implicit: the thesis's per-vertex update, eq. 3.14-3.20")
-    substeps: int | None = Field(None, ge=1, le=1000, description="integration steps per frame (each Δt / substeps); "
-                                 "default 1 for the implicit solver, 4 for the quasi-implicit")
-    iterations: int = Field(60, ge=1, le=10000, description="most conjugate-gradient iterations per implicit step")
-    tolerance: float = Field(1e-3, gt=0, lt=1, description="the implicit step's conjugate gradients stop when the "
-                             "residual has fallen by this factor")
-    bending: float = Field(100.0, ge=0, description="bending stiffness k_b of the skin's displacement (kernels._bending_forces; "
-                           "not in the thesis, where it is 0)")
-    edge_repulsion: bool = Field(True, description="edge repulsion (eq. 3.7); off reproduces the thesis's fig. 3.16")
-    uv_projection: bool = Field(True, description="muscle forces in the 2D projection (eq. 3.21-3.25); off: in 3D")
-    regions: Literal["attached", "moving"] = Field(
-        "attached", description="where the muscles' falloff (eq. 3.2-3.4) and regions (section 3.3) are evaluated: "
-        "attached: where the bones hold the skin (kernels._muscle_forces); moving: at the moving skin, as the thesis")
-
-    @model_validator(mode="before")
-    @classmethod
-    def _preset(cls, data):
-        if isinstance(data, dict) and data.get("preset") in PRESETS:
-            return {**PRESETS[data["preset"]], **data}
-        return data
-
-    @model_validator(mode="after")
-    def _bending_needs_the_whole_stiffness(self):
-        if self.solver == "quasi-implicit" and self.bending > 0:
-            raise ValueError("bending needs solver: implicit (the quasi-implicit update of eq. 3.19 keeps one stiffness "
-                             "per vertex, and a hinge's couples four: measured, happy runs away at bending 60 with 16 "
-                             "steps per frame); give bending: 0 with it, or preset: thesis")
-        return self
 
 
 @dataclass(frozen=True)
@@ -224,40 +161,19 @@ class Model:
 def against_surroundings(x: np.ndarray, faces: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """Which triangles face against the skin around them (a few, in the sharpest creases),
     given the surface's vertex normals (``vertex_normals``)."""
-    from .kernels import _against_surroundings
+    from .checks import _against_surroundings
 
     x = np.ascontiguousarray(x, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     return np.array([_against_surroundings(x, faces, t, normals) for t in range(len(faces))], dtype=bool)
 
 
-def resolved_material(material: Material, resolution: float) -> Material:
-    """The material per vertex on a mesh of resolution scale s (module docstring)."""
-    s = resolution
-    substeps = material.substeps or SUBSTEPS[material.solver]
-    return material.model_copy(update=dict(
-        mass=material.mass * s, damping=material.damping * np.sqrt(s), tissue=material.tissue * s, drive=material.drive * s,
-        substeps=max(substeps, round(substeps / np.sqrt(s))),
-    ))
-
-
-def over_muscle_file(material: Material, muscles: MuscleSet) -> Material:
-    """``material`` over the one the muscle file says its forces were set on
-    (``material:`` in the file): the fields ``material`` was given, and its preset's,
-    win. The Hopper face's file keeps the thesis's skin its forces were chosen on."""
-    if not muscles.material:
-        return material
-    given = material.model_dump(exclude_unset=True)
-    return Material.model_validate({**dict(muscles.material), **PRESETS[material.preset], **given})
-
-
 def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Material(), reorder: bool | None = None) -> Model:
-    """The model of a face; ``material`` (over the muscle file's: ``over_muscle_file``) is
-    per vertex of the default face and is scaled to this mesh's resolution
+    """The model of a face; ``material`` (for a spec's: facesim.face.material's
+    ``over_muscle_file``) is per vertex of the default face and is scaled to this mesh's resolution
     (``Model.material`` is the scaled one). ``reorder``: whether the kernels take the
     mesh's vertices in a cache-friendly order (``reordered``); by default a mesh of at
     least ``REORDER_FROM`` vertices does."""
-    material = over_muscle_file(material, muscles)
     x = mesh.vertices
     faces = mesh.faces
     edges = mesh.edges
@@ -335,7 +251,9 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         implicit=resolved.solver == "implicit", iterations=int(resolved.iterations), tolerance=float(resolved.tolerance),
     )
 
-    from .kernels import _muscle_frame, control
+    from .muscle_forces import _muscle_frame
+
+    from .rig_control import control
 
     rest = control(kernel_arrays, np.zeros(len(muscles.names)))  # O and I where the bones hold them at rest
     origin, insertion = rest.origin, rest.insertion_point
@@ -473,7 +391,7 @@ def ellipse_axes(points: np.ndarray, where: str) -> tuple[float, float]:
 
 def vertex_normals(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(n, 3) the area-weighted unit vertex normals of a surface (kernels._vertex_normals)."""
-    from .kernels import _vertex_normals
+    from ..geometry import _vertex_normals
 
     out = np.empty((len(x), 3))
     _vertex_normals(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64), out)

@@ -13,7 +13,7 @@ time step. A spec is a YAML file validated by pydantic (unknown fields are error
     pose: [...]                 # key-framed head yaw/pitch/roll and gaze yaw/pitch (degrees)
     include: [{spec: happy, weight: 0.6}]   # blends of other specs
     sequence: [...]             # expressions one after another
-    material: {damping: 40}     # optional overrides of facesim.model.Material; {preset: thesis}: the thesis's model
+    material: {damping: 40}     # optional overrides of the material (facesim.face.material); {preset: thesis}: the thesis's model
     mesh: my_face.obj           # optional, relative to the spec (default: ICT's head, meshes/ict/head.npz)
     identity: 3                 # the head's identity: a seed, or weights of its 100 modes
     muscles: my_face.muscles.yaml
@@ -34,11 +34,11 @@ from typing import Literal
 
 from pydantic import Field, PrivateAttr, ValidationError, field_validator, model_validator
 
-from .config import DEFAULT_MESH, LIBRARY, default_muscles
-from .errors import InputError
-from .model import Material
-from .muscles import MuscleSet
-from .schema import Strict, load_model
+from ..config import DEFAULT_MESH, LIBRARY, default_muscles
+from ..errors import InputError
+from ..face.material import MaterialSpec
+from ..physics.muscles import MuscleSet
+from ..schema import Strict, load_model
 from .timeline import (INTERPOLATIONS, MPEG4_FAPS, apply_cooccurrence, au_muscles, envelope_keys,
                        interpolate, parse_intensity)
 
@@ -160,7 +160,7 @@ class Spec(Strict):
     pose: list[PoseTrack] = Field(default_factory=list, description="head and gaze angles over time")
     include: list[Include] = Field(default_factory=list)
     sequence: list[Segment] = Field(default_factory=list)
-    material: Material = Material()
+    material: MaterialSpec = MaterialSpec()
     mesh: Path | None = None
     muscles: Path | None = None
     identity: int | list[float] | None = Field(None, description=(
@@ -226,7 +226,7 @@ class Spec(Strict):
     @property
     def face_directory(self):
         """The spec's face directory read back (facesim.own_face.FaceDirectory), or None."""
-        from .own_face import load_face_directory
+        from ..face.own_face import load_face_directory
 
         return None if self.face is None else load_face_directory(self._relative(self.face, Path()), f"{self.source}: face")
 

@@ -21,6 +21,7 @@ occlusion shells the lid vertices nearest them.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,21 +29,15 @@ import numpy as np
 from numba import njit, prange
 from scipy.sparse import coo_matrix, csr_matrix
 
-from . import cache, mesh
-from .bake import TILES, atlas_uv
-from .config import PARALLEL_OPTIONS
-from .head import Head
-from .mesh import FaceMesh, smooth_interpolation, unique_edges
-from .render import IRIS, PUPIL, SCLERA, SKIN, _rotation
-from .rig import LID_GAP
+from .. import cache
 
-LIPS = (0.74, 0.43, 0.42, 1.0)
-MOUTH_SOCKET = (0.30, 0.08, 0.09, 1.0)
-GUMS = (0.72, 0.36, 0.38, 1.0)
-TEETH = (0.93, 0.91, 0.84, 1.0)
-LASHES = (0.22, 0.16, 0.12, 1.0)
-BROWS = LASHES  # the same hair
-CARUNCLE = (0.78, 0.50, 0.48, 1.0)
+from ..physics import mesh
+from ..config import PARALLEL_OPTIONS
+from .head import Head, HeadMesh
+from ..physics.mesh import FaceMesh, smooth_interpolation, unique_edges
+from ..geometry import axis_rotation, rotation
+from ..physics.rig import LID_GAP
+from .colours import BROWS, CARUNCLE, GUMS, IRIS, LASHES, LIPS, MOUTH_SOCKET, PUPIL, SCLERA, SKIN, TEETH
 
 #: ICT's parts drawn, with the colour (None: per vertex, see head_figure) and roughness of
 #: each; the lacrimal fluid, eye blend and eye occlusion shells exist for a shader's
@@ -117,7 +112,7 @@ class Figure:
             turned = rest @ axis_rotation(self.jaw_axis, jaw_angle).T
             x[self.jaw_rows] += self.jaw_weight[:, None] * (turned - rest)
         if any(gaze):
-            turn = _rotation(*gaze)
+            turn = rotation(*gaze)
             for rows, centre in self.eyes:
                 x[rows] = (x[rows] - centre) @ turn.T + centre
         for rows, centre, radius in self.guards:
@@ -153,12 +148,6 @@ def _followed(rest, rows, indptr, indices, weights, gain, sim, sim_rest, out):
         out[i, 0] += sx
         out[i, 1] += sy
         out[i, 2] += sz
-
-
-def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """3x3 rotation by ``angle`` (radians) about the unit ``axis`` (Rodrigues)."""
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
 
 
 def _rigid_face(x: np.ndarray, face: FaceMesh) -> np.ndarray:
@@ -433,3 +422,50 @@ def _components(triangles: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
     graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
     _, label = connected_components(graph, directed=False)
     return [rows[label[rows] == k] for k in np.unique(label[rows])]
+
+
+#: Figures kept per process (a dataset of many identities keeps only the latest).
+FIGURE_CACHE = 4
+_figures: "OrderedDict[int, tuple]" = OrderedDict()
+
+
+def figure_for(model):
+    """What the renderer draws for a model: a head's figure (built once per model), or
+    None for a face mask."""
+    if not isinstance(model.mesh, HeadMesh):
+        return None
+    if id(model) not in _figures:
+        _figures[id(model)] = (model, head_figure(model.mesh.head, model))  # the model kept alive with its key
+        while len(_figures) > FIGURE_CACHE:
+            _figures.popitem(last=False)
+    _figures.move_to_end(id(model))
+    return _figures[id(model)][1]
+
+
+#: The baked photo's texture atlas (facesim.face.bake): each ICT material that takes the
+#: photo in a tile of its own.
+#: The atlas's tiles: the ICT material each holds, in order left to right, top to bottom.
+TILES = ("M_Face", "M_BackHead", "M_ScleraLeft", "M_IrisLeft", "M_ScleraRight", "M_IrisRight")
+#: Tiles across the atlas (and so, down: two).
+COLUMNS = 3
+#: Texels per tile side.
+TILE = 1024
+
+
+def atlas_uv(head) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The head's textured triangles as drawn: (k,) their indices, (k,) their tile, and
+    (k, 3, 2) their corners' UVs in the atlas's [0, 1]² (v up, as OBJ has it)."""
+    rows = len(TILES) // COLUMNS
+    rows_of, tiles, uvs = [], [], []
+    for index, material in enumerate(TILES):
+        keep = drawn_rows(head, material)
+        uv = head.uv[head.triangle_uv[keep]].astype(np.float64)  # (k, 3, 2)
+        uv -= np.floor(uv.mean(axis=1, keepdims=True))  # into [0, 1]² of its own ICT tile
+        uv = np.clip(uv, 0.0, 1.0)
+        column, row = index % COLUMNS, index // COLUMNS
+        uv[:, :, 0] = (uv[:, :, 0] + column) / COLUMNS
+        uv[:, :, 1] = (uv[:, :, 1] + (rows - 1 - row)) / rows
+        rows_of.append(keep)
+        tiles.append(np.full(len(keep), index))
+        uvs.append(uv)
+    return np.concatenate(rows_of), np.concatenate(tiles), np.concatenate(uvs)

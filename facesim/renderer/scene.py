@@ -29,11 +29,12 @@ from pathlib import Path
 import numpy as np
 from numba import njit, prange
 
-from .config import NUMBA_OPTIONS, PARALLEL_OPTIONS
-from .errors import InputError, RenderError
-from .kernels import _vertex_normals
-from .mesh import FaceMesh
-from .rig import eyeball
+from ..config import NUMBA_OPTIONS, PARALLEL_OPTIONS
+from ..errors import InputError, RenderError
+from ..face.colours import IRIS, MOUTH, PUPIL, SCLERA, SKIN
+from ..geometry import _vertex_normals, rotation
+from ..physics.mesh import FaceMesh
+from ..physics.rig import eyeball
 
 #: Tried in this order by ``--backend auto``. Mesa's software EGL (surfaceless) first: it
 #: renders the same frames about twice as fast as OSMesa here (BENCHMARKS.md), and newer
@@ -53,12 +54,7 @@ LOOKS = ("auto", "clay", "photo")  # auto: photo for a head with a face director
 #: second value at the third (cm): an open mouth is dark inside.
 PHOTO_AMBIENT, MOUTH_DARKEST, MOUTH_DEEP = 0.45, 0.2, 3.5
 
-SKIN = (0.86, 0.66, 0.55, 1.0)
 BACKGROUND = (0.93, 0.93, 0.95, 1.0)
-MOUTH = (0.22, 0.05, 0.06, 1.0)
-SCLERA = (0.95, 0.94, 0.92, 1.0)
-IRIS = (0.28, 0.42, 0.52, 1.0)
-PUPIL = (0.03, 0.03, 0.03, 1.0)
 ARROW = (0.85, 0.05, 0.05, 1.0)
 WIRE = (0.12, 0.14, 0.22, 1.0)
 #: A head's wireframe is drawn this far (cm) in front of the skin, toward the camera.
@@ -402,16 +398,6 @@ def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
     return pose
 
 
-def _rotation(yaw: float = 0.0, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
-    """3x3 rotation for angles in degrees (facesim.spec.POSE): yaw about +y toward +x,
-    pitch lifting +z toward +y, roll tilting +y toward +x."""
-    y, p, r = np.radians([yaw, pitch, roll])
-    turn = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
-    lift = np.array([[1, 0, 0], [0, np.cos(p), np.sin(p)], [0, -np.sin(p), np.cos(p)]])
-    tilt = np.array([[np.cos(r), np.sin(r), 0], [-np.sin(r), np.cos(r), 0], [0, 0, 1]])
-    return turn @ lift @ tilt
-
-
 def _pose(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
     """4x4 pose: turn by ``rotation``, then move by ``translation``."""
     matrix = np.eye(4)
@@ -593,7 +579,7 @@ class FaceRenderer:
             camera = pyrender.PerspectiveCamera(yfov=fov, aspectRatio=settings.width / settings.height, znear=1.0, zfar=10 * distance)
             self._camera = scene.add(camera, pose=_look_at(eye, centre))
         else:
-            from .own_face import onto_photo
+            from ..face.own_face import onto_photo
 
             self._backdrop, fitted = onto_photo(face, settings.onto, (settings.width, settings.height))
             view, pose = _fitted_camera(fitted, self._factor, pyrender)
@@ -733,10 +719,10 @@ class FaceRenderer:
     def pose(self, head_yaw=0.0, head_pitch=0.0, head_roll=0.0, gaze_yaw=0.0, gaze_pitch=0.0) -> None:
         """Turn the head about the neck and the eyes about their centres (degrees, in the
         order of facesim.spec.POSE)."""
-        head = _rotation(head_yaw, head_pitch, head_roll)
+        head = rotation(head_yaw, head_pitch, head_roll)
         self._scene.set_pose(self._head, _pose(head, self._neck - head @ self._neck))  # about the neck
         for node, centre in self._eyes:  # the eyeball is built at the origin, pupil along +z
-            self._scene.set_pose(node, _pose(_rotation(gaze_yaw, gaze_pitch), centre))
+            self._scene.set_pose(node, _pose(rotation(gaze_yaw, gaze_pitch), centre))
 
     def render(self, positions: np.ndarray, arrows: np.ndarray | None = None, pose=None, jaw: float = 0.0) -> np.ndarray:
         """One frame: positions (n, 3) of the face, optional arrows (n, 3) drawn from

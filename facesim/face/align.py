@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .mesh import FaceMesh
-from .schema import read_yaml
+from ..errors import InputError
+from ..physics.mesh import FaceMesh
+from ..schema import read_yaml
 
 #: Landmarks a user can name on their mesh, with their index on the default face.
 NAMED_LANDMARKS = {

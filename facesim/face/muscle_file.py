@@ -1,20 +1,10 @@
-"""Facial muscles on a face mesh (thesis section 3.1.2): the muscle file, its checks,
-and the resolved :class:`MuscleSet` of arrays the model is built from.
+"""The muscle file: its schema and checks, and its muscles placed on a face mesh as a
+facesim.physics.muscles.MuscleSet (``resolve_muscles``).
 
-A linear muscle (Waters; Zhang et al.) runs from its attachment O, on bone, to its
-insertion I, in the skin. Its region of influence is the sector of angle ``zone`` around
-O->I (eq. 3.2), with radial falloff out to ``r`` and ``r_max`` (eq. 3.3), both given as
-multiples of the muscle length |OI| so that one file fits faces of any size.
-
-A sphincter muscle (Waters' elliptical model; not in the thesis) is a ring that contracts
-toward its centre: the orbicularis oris around the mouth, the orbicularis oculi around
-each eye. Its ellipse is fitted to the ring's points; a vertex at elliptical radius ρ
-(1 on the ring) is pulled toward the centre with the radial falloff of eq. 3.3 in ρ,
-rising from the centre to ``r`` and falling to zero at ``r_max`` (ring radii).
-
-The file also names the bone-driven parts of the face (facesim.rig): the jaw's hinge and
-the lips that do and do not follow it, and each eye's upper and lower lid contours. They
-are driven like muscles, by activations named ``jaw`` and ``eyelid_r`` / ``eyelid_l``.
+The file also names the bone-driven parts of the face (facesim.physics.rig): the jaw's
+hinge and the lips that do and do not follow it, and each eye's upper and lower lid
+contours. They are driven like muscles, by activations named ``jaw`` and ``eyelid_r`` /
+``eyelid_l``.
 
 Points are landmark indices or 3D points (cm) snapped to the nearest vertex, so a mesh of
 another topology can carry the same file. Attachments are pinned (the single-layer face has
@@ -26,20 +16,22 @@ muscle pull.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
 import numpy as np
 from pydantic import Field, StrictInt, field_validator, model_validator
 
-from .config import MIDLINE_FRACTION, SNAP_FRACTION
-from .errors import InputError
-from .mesh import FaceMesh
-from .schema import Strict, load_model
+from ..config import MIDLINE_FRACTION, SNAP_FRACTION
+from ..errors import InputError
+from ..physics.mesh import FaceMesh
+from ..schema import Strict, load_model
+from ..physics.muscles import EyelidRig, JawRig, LINEAR, MuscleSet, SPHINCTER
 
 #: A landmark: a vertex index (an integer: YAML's ``true`` is not vertex 1) or a 3D point.
 Point = Annotated[StrictInt, Field(ge=0)] | tuple[float, float, float]
+
+
 NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 
 
@@ -141,7 +133,7 @@ class Eyelid(_Contours):
 class Pinned(Strict):
     """Vertices held where the bones put them: the mask's outer rim, listed vertices, and
     (``attachments``, the thesis's face) each linear muscle's attachment. A head's skin is
-    tied to the skull everywhere by the hypodermis (facesim.model.Material.tissue), so
+    tied to the skull everywhere by the hypodermis (facesim.physics.material.Material.tissue), so
     its attachments need no pin, and unpinned they let the skin over the cheekbone and
     the brow move under other muscles (a cheek raiser lifts the zygomaticus's origin).
 
@@ -167,7 +159,7 @@ class Pinned(Strict):
 
 class MuscleFile(Strict):
     units: Literal["cm"] = "cm"
-    material: dict[str, Any] = Field({}, description="the material (facesim.model.Material's fields) the forces were "
+    material: dict[str, Any] = Field({}, description="the material (facesim.physics.material.Material's fields) the forces were "
                                      "set on; a spec's material and its preset win over it")
     defaults: MuscleDefaults = MuscleDefaults()
     pinned: Pinned = Pinned()
@@ -190,81 +182,6 @@ class MuscleFile(Strict):
     def _defaults_ordered(cls, d: MuscleDefaults) -> MuscleDefaults:
         _ordered(d.falloff)
         return d
-
-
-LINEAR, SPHINCTER = 0, 1
-
-
-@dataclass(frozen=True)
-class JawRig:
-    """The jaw resolved onto a mesh: hinge (2, 3) points in cm, lower/upper vertex indices,
-    max_angle and the lips' contact_tilt in radians."""
-
-    hinge: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    max_angle: float
-    contact_tilt: float = 0.0
-
-
-@dataclass(frozen=True)
-class EyelidRig:
-    """One eye's lid contours resolved onto a mesh, paired corner to corner."""
-
-    name: str
-    upper: np.ndarray
-    lower: np.ndarray
-    reach: float
-    levator: str | None = None
-    levator_angle: float = 0.0  # radians
-
-
-@dataclass(frozen=True)
-class MuscleSet:
-    """Muscles resolved onto a mesh. Per-muscle arrays are indexed by muscle (M of them).
-
-    names : the activation columns, the M muscles then the controls (``jaw``, the eyelids);
-    kind : (M,) LINEAR or SPHINCTER; attachment : (M,) vertex of O, -1 for a sphincter;
-    insertion : (M,) vertex of I, for a sphincter the ring vertex its flood fill starts at;
-    centre_start, centre_index : the vertices whose mean is O (a linear muscle's
-    attachment, a sphincter's centre points), in compressed rows; ring : a sphincter's ring
-    vertices (empty for a linear muscle); zone : (M,) radians; falloff : (M, 2) r and r_max
-    in muscle lengths or ring radii; force : (M,); protrusion : (M,) the push along the
-    skin's rest normal per unit of its pull (the pucker's pout, the buccinator's press
-    inward); pinned : (p,) int64; tied : the rim's vertices tied to the bones with
-    stiffness ``tie`` (Pinned), (q,) int64.
-    """
-
-    names: tuple[str, ...]
-    kind: np.ndarray
-    attachment: np.ndarray
-    insertion: np.ndarray
-    centre_start: np.ndarray
-    centre_index: np.ndarray
-    ring: tuple[np.ndarray, ...]
-    zone: np.ndarray
-    falloff: np.ndarray
-    force: np.ndarray
-    pinned: np.ndarray
-    protrusion: np.ndarray
-    tied: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    tie: float = 0.0
-    jaw: JawRig | None = None
-    eyelids: tuple[EyelidRig, ...] = ()
-    source: str = ""
-    material: tuple[tuple[str, Any], ...] = ()  # the file's material fields (MuscleFile.material)
-
-    @property
-    def count(self) -> int:
-        """How many muscles (the controls are not counted)."""
-        return len(self.force)
-
-    @property
-    def controls(self) -> tuple[str, ...]:
-        return self.names[self.count:]
-
-    def index(self, name: str) -> int:
-        return self.names.index(name)
 
 
 def _snap(point: Point, mesh: FaceMesh, where: str, below: int | None = None) -> int:
@@ -403,13 +320,13 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
 
 
 def _material_fields(fields: dict, source: str) -> tuple:
-    """A muscle file's material, checked as facesim.model.Material's fields."""
+    """A muscle file's material, checked as a spec's (facesim.face.material.MaterialSpec)."""
     from pydantic import ValidationError
 
-    from .model import Material
+    from .material import MaterialSpec
 
     try:
-        Material.model_validate(fields)
+        MaterialSpec.model_validate(fields)
     except ValidationError as error:
         first = error.errors()[0]
         raise InputError(f"{source}: material -> {' -> '.join(map(str, first['loc']))}: {first['msg']}") from None

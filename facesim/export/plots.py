@@ -8,33 +8,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .writers import atomic_path
-
-
-def muscle_regions(model) -> list[np.ndarray]:
-    """Each muscle's region of influence at rest (the flood fill of section 3.3)."""
-    from . import kernels
-
-    work = kernels.workspace(model.arrays)
-    rest = kernels.control(model.arrays, np.zeros(len(model.muscles.names)))
-    kernels._muscle_frame(model.arrays, model.arrays.rest_position, work.frame)
-    regions = []
-    for m in range(model.muscle_count):
-        count = kernels._region_of_influence(model.arrays, m, rest.origin, rest.insertion_point, work.frame, work)
-        regions.append(np.array(model.mesh_vertex(work.region[:count])))
-    return regions
+from ..files import atomic_path
 
 
 def _front_view(model, backend: str) -> tuple[np.ndarray | None, np.ndarray]:
     """What the muscle map is drawn over: for a head (facesim.figure), its front render and
     where each simulated vertex shows on it, centred, y up, in pixels; for a mask, nothing
     and its own x, y."""
-    from .simulate import figure_for
-
+    from ..face.figure import figure_for
     figure = figure_for(model)
     if figure is None:
         return None, model.rest_position[:, :2]
-    from .render import FaceRenderer, RenderSettings
+    from ..renderer.scene import FaceRenderer, RenderSettings
 
     settings = RenderSettings(900, 1000)
     with FaceRenderer(model.rest_position, model.faces, settings, backend, figure) as renderer:
@@ -43,9 +28,10 @@ def _front_view(model, backend: str) -> tuple[np.ndarray | None, np.ndarray]:
     return image, np.column_stack([pixels[:, 0] - settings.width / 2, settings.height / 2 - pixels[:, 1]])
 
 
-def plot_muscles(model, path: Path, backend: str = "auto") -> None:
+def plot_muscles(model, regions: list[np.ndarray], path: Path, backend: str = "auto") -> None:
     """The face from the front (a head rendered, a mask as its mesh), every muscle an
-    arrow from insertion to attachment, its region of influence shaded."""
+    arrow from insertion to attachment, its region of influence (``regions``, the mesh's
+    vertices of each: facesim.physics.run.muscle_regions) shaded."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -61,7 +47,7 @@ def plot_muscles(model, path: Path, backend: str = "auto") -> None:
                alpha=1.0 if image is None else 0.35)
     cmap = plt.get_cmap("tab20")
     families = sorted({n.removesuffix("_l").removesuffix("_r") for n in names})
-    for m, region in enumerate(muscle_regions(model)):
+    for m, region in enumerate(regions):
         family = names[m].removesuffix("_l").removesuffix("_r")
         colour = cmap(families.index(family) % 20)
         ax.scatter(x[region, 0], x[region, 1], s=28, color=colour, alpha=0.35, lw=0)

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 #: The files of a face directory (what ``--force`` may replace).
 FACE_FILES = frozenset({"head.obj", "head.mtl", "head.png", "head_onto.png", "face.yaml", "muscles.yaml"})
@@ -79,7 +79,7 @@ def _load_face_directory(path: Path, stamp: tuple) -> FaceDirectory:
     import yaml
     from PIL import Image
 
-    from .bake import COLUMNS, TILE, TILES
+    from .figure import COLUMNS, TILE, TILES
     from .fit import Camera
     from .head import IDENTITY_MODES
 
@@ -136,7 +136,7 @@ def onto_photo(face: FaceDirectory, photo: str | Path, size: tuple[int, int] | N
 
 
 def _colours():
-    from .figure import GUMS, LASHES, TEETH
+    from .colours import GUMS, LASHES, TEETH
 
     return {"M_GumsTongue": GUMS, "M_Teeth": TEETH, "M_EyeLashes": LASHES}
 
@@ -185,15 +185,16 @@ def face_from_photo(photo: str | Path, output: str | Path, replace: bool = False
     import imageio.v3 as iio
     import yaml
 
-    from . import __version__
-    from .bake import atlas_uv, bake
-    from .config import HEAD, HEAD_MUSCLES
+    from ..config import VERSION
+    from .bake import bake
+    from .figure import atlas_uv
+    from ..config import HEAD, HEAD_MUSCLES
     from .fit import fit_head
     from .head import load_head
     from .photo import detect_landmarks, read_image
-    from .model import Material
-    from .simulate import _model, figure_for
-    from .writers import atomic_path
+    from .figure import figure_for
+    from .loading import load_face_model
+    from ..files import atomic_path
 
     try:
         import mediapipe  # noqa: F401
@@ -204,14 +205,14 @@ def face_from_photo(photo: str | Path, output: str | Path, replace: bool = False
     landmarks = detect_landmarks(image, str(photo), notice, refine=True)
     fit = fit_head(load_head(HEAD), HEAD, landmarks, image.shape[1], image.shape[0], str(photo))
     identity = tuple(float(w) for w in fit.identity)
-    model = _model(HEAD.resolve(), HEAD_MUSCLES.resolve(), Material(), identity)
+    model = load_face_model(HEAD.resolve(), HEAD_MUSCLES.resolve(), identity=identity)
     head = model.mesh.head
     atlas = atlas_uv(head)
     texture, onto = bake(head, fit.camera, image, figure_for(model).colour, atlas)
     uv_rows, _, uv = atlas
     residual = fit.residual
     record = dict(
-        created_by=f"facesim {__version__} face from-photo",
+        created_by=f"facesim {VERSION} face from-photo",
         photo=photo.name,
         identity=list(identity),
         camera=fit.camera.as_dict(),

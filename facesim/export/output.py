@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .render import FaceRenderer, RenderSettings, shared_renderer
-from .simulate import Animation, muscle_forces
-from .workers import worker_pool
-from .writers import WriteError, atomic_path, check_destination, check_terminated
+from ..errors import InputError
+from ..renderer.scene import FaceRenderer, RenderSettings, shared_renderer
+from ..animation.simulate import Animation
+from ..workers import worker_pool
+from ..files import WriteError, atomic_path, check_destination, check_terminated
 
 FULL_DISK = 1 << 20  # bytes free under which a short output is put down to a full disk
 KINDS = {".mp4": "mp4", ".gif": "gif", ".npz": "npz"}
@@ -88,12 +88,12 @@ def _verify_frames(kind: str, count: int, fps: float):
     return verify
 
 
-def arrows_for(animation: Animation) -> np.ndarray | None:
-    """Muscle-force arrows (frames, n, 3) for --show-muscles."""
-    model = animation.model
-    return np.stack([
-        ARROW_SCALE * muscle_forces(model, p, a) for p, a in zip(animation.positions, animation.activations)
-    ])
+def arrows_for(animation: Animation) -> np.ndarray:
+    """Muscle-force arrows (frames, n, 3) for --show-muscles, from an animation simulated
+    ``with_muscle_forces`` (facesim.animation.simulate)."""
+    if animation.muscle_force is None:
+        raise ValueError("--show-muscles draws the muscle forces: simulate(spec, with_muscle_forces=True)")
+    return ARROW_SCALE * animation.muscle_force
 
 
 def _render_chunk(rest, faces, settings, backend, figure, face, positions, arrows, pose, jaw):
@@ -242,6 +242,18 @@ def write_animation(animation: Animation, path: Path, settings: RenderSettings, 
         write_frames(frames, path, kind, fps or animation.fps, replace, count=animation.frames)
     return RenderReport(animation.name, path, len(animation.active_muscles), animation.frames, animation.simulation_seconds,
                         time.perf_counter() - start)
+
+
+def render(animation: Animation, path: str | Path, settings: RenderSettings | None = None, force: bool = False,
+           backend: str = "auto") -> RenderReport:
+    """Write an animation (facesim.simulate's) to ``path`` as ``facesim render -o`` does:
+    an MP4, GIF, NPZ or a directory of PNG frames by its name, drawn with ``settings``
+    (512x512 from the front by default). ``force``: replace an output facesim wrote
+    before. The path is checked before anything is drawn (InputError)."""
+    path = Path(path)
+    settings = (settings or RenderSettings()).for_face(animation.face)
+    check_output(path, force, settings)
+    return write_animation(animation, path, settings, backend=backend, replace=force)
 
 
 def progress_bar(total: int, description: str, enabled: bool | None = None):

@@ -17,7 +17,7 @@ state and the frame's control, and advances the state in place:
 
 - ``_implicit_step`` (the default): the same prediction and terms, then the linearised
   backward-Euler step with the whole stiffness K = -∂F/∂X that the terms give as links
-  (kernels.Forces: 3x3 blocks between neighbours, where the thesis keeps one number per
+  (layout.Forces: 3x3 blocks between neighbours, where the thesis keeps one number per
   vertex),
 
       (m + Δt C + Δt² K) V' = m V + Δt F + Δt² K V,
@@ -51,9 +51,9 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
-from . import kernels
-from .config import NUMBA_OPTIONS, PARALLEL_OPTIONS
-from .kernels import INVERTED, NOT_FINITE, OK, RUNAWAY
+from . import bending, checks, contacts, damping, layout, muscle_forces, numerics, repulsion, rig_control, springs, tissue
+from ..config import NUMBA_OPTIONS, PARALLEL_OPTIONS
+from .layout import INVERTED, NOT_FINITE, OK, RUNAWAY
 from .mesh import inverse_permutation
 
 #: The preconditioner of the implicit step: P A Pᵀ = L U for the system A at rest
@@ -81,12 +81,12 @@ def _forces(model, xp, control, work, forces):
     forces.stiffness[:] = 0.0
     forces.damping[:] = 0.0
     forces.diagonal[:] = 0.0
-    kernels._spring_forces(model, xp, forces)  # eq. 3.6
-    kernels._edge_repulsion_forces(model, xp, forces)  # eq. 3.7
-    kernels._bending_forces(model, xp, control, forces)  # Bergou et al. 2006, on the displacement
-    kernels._damping_forces(model, forces)  # eq. 3.10
-    kernels._tissue_forces(model, xp, control, forces)  # hypodermis, and the rig's drive
-    kernels._muscle_forces(model, xp, control, work, forces)  # eq. 3.1-3.4, 3.21-3.25
+    springs._spring_forces(model, xp, forces)  # eq. 3.6
+    repulsion._edge_repulsion_forces(model, xp, forces)  # eq. 3.7
+    bending._bending_forces(model, xp, control, forces)  # Bergou et al. 2006, on the displacement
+    damping._damping_forces(model, forces)  # eq. 3.10
+    tissue._tissue_forces(model, xp, control, forces)  # hypodermis, and the rig's drive
+    muscle_forces._muscle_forces(model, xp, control, work, forces)  # eq. 3.1-3.4, 3.21-3.25
 
 
 @njit(**PARALLEL_OPTIONS)
@@ -119,25 +119,25 @@ def _quasi_implicit_step(model, state, control, h, xp, work, forces):
         for d in range(3):
             v[i, d] = (m * v[i, d] + h * force[i, d] - h * h * k * v[i, d]) / denominator
             x[i, d] += h * v[i, d]  # eq. 3.16
-    kernels._contacts(model, state)
+    contacts._contacts(model, state)
 
 
 @njit(**NUMBA_OPTIONS)
 def _stiffness_product(forces, p, out):
-    """out = K p for the stiffness the terms wrote (kernels.Forces): the isotropic diagonal,
+    """out = K p for the stiffness the terms wrote (layout.Forces): the isotropic diagonal,
     then each link's blocks w_p w_q B applied to its extension u = Σ w_k p_k."""
     for i in range(p.shape[0]):
         for d in range(3):
             out[i, d] = forces.diagonal[i] * p[i, d]
     for l in range(forces.along.shape[0]):
-        ux, uy, uz = kernels._link_extension(forces.node, forces.weight, l, p)
+        ux, uy, uz = numerics._link_extension(forces.node, forces.weight, l, p)
         ax, ay, az = forces.axis[l, 0], forces.axis[l, 1], forces.axis[l, 2]
         across = forces.across[l]
         projection = (forces.along[l] - across) * (ax * ux + ay * uy + az * uz)
         bx = across * ux + projection * ax
         by = across * uy + projection * ay
         bz = across * uz + projection * az
-        kernels._link_spread(forces.node, forces.weight, l, 1.0, bx, by, bz, out)
+        numerics._link_spread(forces.node, forces.weight, l, 1.0, bx, by, bz, out)
 
 
 @njit(**NUMBA_OPTIONS)
@@ -152,7 +152,7 @@ def _system_product(model, forces, h, p, out):
 
 @njit(**NUMBA_OPTIONS)
 def _link_block(forces, l, d, e):
-    """Entry (d, e) of link l's 3x3 block B = along a aᵀ + across (I - a aᵀ) (kernels.Forces)."""
+    """Entry (d, e) of link l's 3x3 block B = along a aᵀ + across (I - a aᵀ) (layout.Forces)."""
     across = forces.across[l]
     return (forces.along[l] - across) * forces.axis[l, d] * forces.axis[l, e] + (across if d == e else 0.0)
 
@@ -174,7 +174,7 @@ def _jacobi(model, forces, h, out):
 @njit(**NUMBA_OPTIONS)
 def _system_entries(model, forces, h, place, rows, columns, values):
     """The entries of A = m + Δt C + Δt² K as triplets (duplicates to be summed), 3n for
-    the diagonal then 144 per link (its 4x4 blocks w_p w_q B, ``kernels.Forces``), vertex
+    the diagonal then 144 per link (its 4x4 blocks w_p w_q B, ``layout.Forces``), vertex
     i's coordinates in rows and columns 3 place[i] to 3 place[i] + 2; a pinned vertex's
     rows and columns are the identity's. Returns how many were written."""
     count = 0
@@ -216,9 +216,9 @@ def rest_preconditioner(model, h: float) -> Factor:
     from scipy.sparse.linalg import splu
 
     n, arrays = model.vertex_count, model.arrays
-    control = kernels.control(arrays, np.zeros(len(model.muscles.names)))
-    forces = kernels.forces(arrays)
-    _forces(arrays, np.array(control.target), control, kernels.workspace(arrays), forces)
+    control = rig_control.control(arrays, np.zeros(len(model.muscles.names)))
+    forces = layout.forces(arrays)
+    _forces(arrays, np.array(control.target), control, layout.workspace(arrays), forces)
     # the graph of the vertices that A couples: the pairs of each link's nodes, pinned ones left out
     node, free = forces.node, ~arrays.pinned
     first, second = np.repeat(node, 4, axis=1).ravel(), np.tile(node, (1, 4)).ravel()
@@ -370,7 +370,7 @@ def _implicit_step(model, state, control, h, xp, work, forces, krylov):
     for i in range(x.shape[0]):
         for d in range(3):
             x[i, d] += h * v[i, d]  # eq. 3.16
-    kernels._contacts(model, state)
+    contacts._contacts(model, state)
     return iteration
 
 
@@ -414,14 +414,14 @@ def _simulate(model, activations, start, stop, dt, substeps, energy_limit, stop_
                     moving = moving or control.activation[c] != 0.0 or previous != 0.0
             if moving or not at_rest:
                 at_rest = not moving
-                kernels._rig_control(model, control)
+                rig_control._rig_control(model, control)
             if model.implicit:
                 _implicit_step(model, state, control, h, xp, work, forces, krylov)
             else:
                 _quasi_implicit_step(model, state, control, h, xp, work, forces)
-        bad = kernels._not_finite(x)
+        bad = numerics._not_finite(x)
         if bad < 0:
-            bad = kernels._not_finite(v)
+            bad = numerics._not_finite(v)
         if bad >= 0:
             return NOT_FINITE, f, bad
         energy = 0.0
@@ -429,7 +429,7 @@ def _simulate(model, activations, start, stop, dt, substeps, energy_limit, stop_
             for d in range(3):
                 energy += 0.5 * model.mass * v[i, d] * v[i, d]
                 out.positions[f, i, d] = x[i, d]
-        count, first, smallest = kernels._triangle_checks(x, model.faces, model.rest_normal, model.rest_area,
+        count, first, smallest = checks._triangle_checks(x, model.faces, model.rest_normal, model.rest_area,
                                                           model.rest_against, normals)
         out.kinetic_energy[f] = energy
         out.inverted[f] = count

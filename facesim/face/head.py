@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .mesh import FaceMesh
+from ..errors import InputError
+from ..physics.mesh import FaceMesh
 
 #: How many identity modes the head has (all of ICT's).
 IDENTITY_MODES = 100
@@ -86,8 +86,7 @@ class Head:
         then made exactly symmetric about x = 0 (the fit leaves it 1e-5 cm off, enough to
         make left and right muscles differ by round-off)."""
         from .align import similarity
-        from .mesh import mirror_map
-
+        from ..physics.mesh import mirror_map
         scale, rotation, translation = similarity(mask.vertices, self.landmark_positions)
         placed = scale * mask.vertices @ rotation.T + translation
         placed = 0.5 * (placed + placed[mirror_map(placed, mask.faces)] * np.array([-1.0, 1.0, 1.0]))

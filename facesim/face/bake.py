@@ -37,18 +37,13 @@ import math
 import numpy as np
 from numba import njit
 
-from .config import NUMBA_OPTIONS
-from .render import SKIN
+from ..config import NUMBA_OPTIONS
+from .colours import SKIN
+from .figure import COLUMNS, TILE, TILES, atlas_uv
 
-#: The atlas's tiles: the ICT material each holds, in order left to right, top to bottom.
-TILES = ("M_Face", "M_BackHead", "M_ScleraLeft", "M_IrisLeft", "M_ScleraRight", "M_IrisRight")
-#: Tiles across the atlas (and so, down: two).
-COLUMNS = 3
 #: Which surface each tile belongs to, for what hides what: the skin (face and back of the
 #: head), then each eye's sclera and inner sphere (which shows only through the cornea).
 SURFACE = (0, 0, 1, 2, 3, 4)
-#: Texels per tile side.
-TILE = 1024
 #: A texel is seen when it lies within this depth of the nearest surface at its pixel:
 #: this many cm, or this many of the photo's pixels (a pixel spans a range of depths on a
 #: sloping surface), whichever is more.
@@ -60,27 +55,6 @@ DEPTH_TOLERANCE = (0.08, 1.5)
 GRAZING = (0.02, 0.12)
 #: Texels over which the photo's colour fades into the tone at the edge of what was seen.
 FEATHER = 12
-
-
-def atlas_uv(head) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The head's textured triangles as drawn: (k,) their indices, (k,) their tile, and
-    (k, 3, 2) their corners' UVs in the atlas's [0, 1]² (v up, as OBJ has it)."""
-    from .figure import drawn_rows
-
-    rows = len(TILES) // COLUMNS
-    rows_of, tiles, uvs = [], [], []
-    for index, material in enumerate(TILES):
-        keep = drawn_rows(head, material)
-        uv = head.uv[head.triangle_uv[keep]].astype(np.float64)  # (k, 3, 2)
-        uv -= np.floor(uv.mean(axis=1, keepdims=True))  # into [0, 1]² of its own ICT tile
-        uv = np.clip(uv, 0.0, 1.0)
-        column, row = index % COLUMNS, index // COLUMNS
-        uv[:, :, 0] = (uv[:, :, 0] + column) / COLUMNS
-        uv[:, :, 1] = (uv[:, :, 1] + (rows - 1 - row)) / rows
-        rows_of.append(keep)
-        tiles.append(np.full(len(keep), index))
-        uvs.append(uv)
-    return np.concatenate(rows_of), np.concatenate(tiles), np.concatenate(uvs)
 
 
 @njit(**NUMBA_OPTIONS)
@@ -210,7 +184,7 @@ def bake(head, camera, photo: np.ndarray, vertex_colour: np.ndarray, atlas=None)
     away: only the render can show it)."""
     from scipy.ndimage import distance_transform_edt
 
-    from .kernels import _vertex_normals
+    from ..geometry import _vertex_normals
 
     x = np.ascontiguousarray(head.vertices, dtype=np.float64)
     normals = np.empty_like(x)

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .align import similarity
-from .errors import InputError
+from ..errors import InputError
 from .head import IDENTITY_MODES, Head, _identity_deltas
 
 #: A landmark's uncertainty on the head (cm), the prior's weight against the landmarks:

@@ -1,0 +1,190 @@
+"""Running a spec: model, activation table, the Numba simulation, diagnostics.
+
+``simulate(spec)`` is the one entry point: it builds (and caches) the model of the spec's
+mesh, muscles and material, turns the spec into a (frames, muscles) activation table,
+runs it (facesim.physics.run) and wraps the result in an :class:`Animation`. A simulation
+that blows up raises :class:`SimulationError` naming the frame and the vertex or triangle.
+
+``simulate(spec, background=True)`` returns the Animation at once and simulates on a
+thread of its own (the kernels release the GIL), frame by frame into its arrays, so
+that ``facesim render`` draws and encodes the first frames while the later ones are
+simulated (a face simulated on one thread; a larger mesh's simulation, which wants
+every core, runs first: ``simulate``); ``Animation.ready(f)`` waits for frame f, and raises the simulation's error
+for a frame it did not reach.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..config import PARALLEL_FROM
+from ..face.figure import figure_for
+from ..face.loading import load_face_model
+from ..physics.model import Model
+from ..physics.run import Progress, concurrent_kernels, diagnostics, muscle_forces, run
+from .spec import Spec, activation_table, pose_table
+
+#: A run expected to take longer than this (s) is announced before it starts.
+LONG_RUN = 120.0
+#: Vertex-steps per second assumed for that estimate (BENCHMARKS.md: 2-4 million).
+STEP_RATE = 2e6
+
+
+@dataclass(frozen=True)
+class Animation:
+    """The result of a simulation.
+
+    positions : (frames, n, 3) cm; rest : (n, 3); faces : (t, 3);
+    activations : (frames, M + controls); pose : (frames, 5) head and gaze angles in
+    degrees (facesim.spec.POSE), applied at render time; kinetic_energy, smallest_area :
+    (frames,) float; inverted : (frames,) int (triangles turned over and folded against
+    the skin around them, ``checks._triangle_checks``); face : the face directory
+    (facesim.own_face.FaceDirectory) whose head this is, if any: its texture and camera;
+    progress : set while it is simulated in the background (``ready``); muscle_force :
+    (frames, n, 3) the muscles' forces on each frame (eq. 3.1-3.25), when simulated
+    ``with_muscle_forces``.
+    """
+
+    name: str
+    positions: np.ndarray
+    rest: np.ndarray
+    faces: np.ndarray
+    activations: np.ndarray
+    muscle_names: tuple[str, ...]
+    dt: float
+    fps: float
+    kinetic_energy: np.ndarray
+    inverted: np.ndarray
+    smallest_area: np.ndarray
+    seconds: float = 0.0
+    model: Model | None = field(default=None, repr=False, compare=False)
+    pose: np.ndarray | None = None
+    face: object = None
+    progress: Progress | None = field(default=None, repr=False, compare=False)
+    muscle_force: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def ready(self, frame: int | None = None) -> "Animation":
+        """Wait until ``frame`` (by default the last) is simulated, when the animation is
+        simulated in the background; raises the simulation's error (SimulationError) for
+        a frame it did not reach."""
+        if self.progress is not None:
+            self.progress.wait(self.frames - 1 if frame is None else frame)
+        return self
+
+    def cancel(self) -> None:
+        """Stop a background simulation after the frame it is on (a failed render)."""
+        if self.progress is not None:
+            self.progress.cancelled = True
+
+    @property
+    def simulation_seconds(self) -> float:
+        """Seconds spent simulating (so far, in the background)."""
+        return self.seconds if self.progress is None else self.progress.seconds
+
+    def pose_at(self, frame: int) -> np.ndarray | None:
+        return None if self.pose is None else self.pose[frame]
+
+    def jaw_at(self, frame: int) -> float:
+        """The jaw's angle (radians) at a frame: its activation times its largest angle."""
+        return float(self.jaw[frame])
+
+    @property
+    def jaw(self) -> np.ndarray:
+        """(frames,) the jaw's angle (radians): its activation times its largest angle."""
+        rig = None if self.model is None else self.model.rig
+        if rig is None or rig.jaw_column < 0:
+            return np.zeros(self.frames)
+        return self.activations[:, rig.jaw_column] * rig.jaw_max
+
+    @property
+    def figure(self):
+        """The head this animation's face drives (facesim.figure), or None for a mask."""
+        return None if self.model is None else figure_for(self.model)
+
+    @property
+    def frames(self) -> int:
+        return len(self.positions)
+
+    @property
+    def active_muscles(self) -> tuple[str, ...]:
+        return tuple(n for n, a in zip(self.muscle_names, self.activations.max(axis=0)) if a > 0)
+
+
+def _identity_key(identity):
+    return tuple(identity) if isinstance(identity, list) else identity
+
+
+def model_for(spec: Spec) -> Model:
+    """The (cached) model of a spec's mesh, muscles, material and identity."""
+    return load_face_model(spec.mesh_path.resolve(), spec.muscles_path.resolve(), spec.material, _identity_key(spec.head_identity))
+
+
+def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background: bool = False,
+             with_muscle_forces: bool = False) -> Animation:
+    """Simulate an expression spec from the neutral face. ``notice`` receives a one-line
+    estimate before a run expected to take minutes. ``background``: return at once and
+    simulate on a thread of its own (module docstring), where Numba allows it
+    (``concurrent_kernels``) and the mesh is simulated on one thread (fewer than
+    ``PARALLEL_FROM`` vertices); the spec, mesh and muscles are checked before it starts
+    either way. ``with_muscle_forces``: the muscles' forces on every frame too
+    (``Animation.muscle_force``, what ``--show-muscles`` draws), after a simulation on
+    this thread.
+
+    A larger mesh is simulated first: its simulation wants every core, and the renderer
+    (llvmpipe's rasteriser threads, the frames' preparation, the encoder) already keeps
+    two busy. Happy on the Hopper face subdivided twice (6,990 vertices) to MP4 at 512²,
+    side by side in one process on two cores (2026-12-03): 891 ms simulated first, 1,271
+    overlapped with the simulation on two threads (whose loops wait at their ends for
+    the thread the renderer holds off its core), 1,103 against 1,268 on one thread. The
+    head's 468 vertices: 1,035 -> 988 ms and 1,048 -> 1,013."""
+    model = model_for(spec)
+    table = activation_table(spec, model.muscles)
+    expected = len(table) * model.material.substeps * model.vertex_count / STEP_RATE
+    if notice and expected > LONG_RUN:
+        notice(f"{spec.source}: {len(table)} frames x {model.material.substeps} sub-steps x {model.vertex_count:,} "
+               f"vertices: about {expected / 60:.0f} minutes of simulation (Ctrl-C stops it)")
+    out = diagnostics(len(table), model.vertex_count)
+    progress = Progress() if background and not with_muscle_forces and concurrent_kernels() and model.vertex_count < PARALLEL_FROM else None
+
+    def simulated():
+        run(model, table, spec.dt, stop_on_inversion, spec.source, out=out, progress=progress)
+
+    def in_background():
+        try:
+            simulated()
+        except BaseException as error:  # for Animation.ready to raise where the frames are wanted
+            progress.fail(error)
+
+    start = time.perf_counter()
+    if progress:
+        threading.Thread(target=in_background, name="facesim-simulation", daemon=True).start()
+    else:
+        simulated()
+    seconds = time.perf_counter() - start
+    positions, energy, inverted, smallest = out
+    force = np.stack([muscle_forces(model, p, a) for p, a in zip(positions, table)]) if with_muscle_forces else None
+    return Animation(
+        name=spec.title,
+        positions=positions,
+        rest=model.rest_position,
+        faces=model.faces,
+        activations=table,
+        muscle_names=model.muscles.names,
+        dt=spec.dt,
+        fps=spec.fps,
+        kinetic_energy=energy,
+        inverted=inverted,
+        smallest_area=smallest,
+        seconds=seconds,
+        model=model,
+        pose=pose_table(spec) if spec.pose else None,
+        face=spec.face_directory,
+        progress=progress,
+        muscle_force=force,
+    )
+
+

@@ -1,0 +1,100 @@
+"""Facial muscles resolved onto a face mesh (thesis section 3.1.2): the arrays of
+:class:`MuscleSet` the model is built from, and the bone-driven parts (the jaw, the
+eyelids) as :class:`JawRig` and :class:`EyelidRig`.
+
+A linear muscle (Waters; Zhang et al.) runs from its attachment O, on bone, to its
+insertion I, in the skin. Its region of influence is the sector of angle ``zone`` around
+O->I (eq. 3.2), with radial falloff out to ``r`` and ``r_max`` (eq. 3.3), both in
+multiples of the muscle length |OI| so that one set fits faces of any size.
+
+A sphincter muscle (Waters' elliptical model; not in the thesis) is a ring that contracts
+toward its centre: the orbicularis oris around the mouth, the orbicularis oculi around
+each eye. Its ellipse is fitted to the ring's points; a vertex at elliptical radius ρ
+(1 on the ring) is pulled toward the centre with the radial falloff of eq. 3.3 in ρ,
+rising from the centre to ``r`` and falling to zero at ``r_max`` (ring radii).
+
+The muscle file these come from, and how its points find their vertices:
+facesim.face.muscle_file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+LINEAR, SPHINCTER = 0, 1
+
+
+@dataclass(frozen=True)
+class JawRig:
+    """The jaw resolved onto a mesh: hinge (2, 3) points in cm, lower/upper vertex indices,
+    max_angle and the lips' contact_tilt in radians."""
+
+    hinge: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    max_angle: float
+    contact_tilt: float = 0.0
+
+
+@dataclass(frozen=True)
+class EyelidRig:
+    """One eye's lid contours resolved onto a mesh, paired corner to corner."""
+
+    name: str
+    upper: np.ndarray
+    lower: np.ndarray
+    reach: float
+    levator: str | None = None
+    levator_angle: float = 0.0  # radians
+
+
+@dataclass(frozen=True)
+class MuscleSet:
+    """Muscles resolved onto a mesh. Per-muscle arrays are indexed by muscle (M of them).
+
+    names : the activation columns, the M muscles then the controls (``jaw``, the eyelids);
+    kind : (M,) LINEAR or SPHINCTER; attachment : (M,) vertex of O, -1 for a sphincter;
+    insertion : (M,) vertex of I, for a sphincter the ring vertex its flood fill starts at;
+    centre_start, centre_index : the vertices whose mean is O (a linear muscle's
+    attachment, a sphincter's centre points), in compressed rows; ring : a sphincter's ring
+    vertices (empty for a linear muscle); zone : (M,) radians; falloff : (M, 2) r and r_max
+    in muscle lengths or ring radii; force : (M,); protrusion : (M,) the push along the
+    skin's rest normal per unit of its pull (the pucker's pout, the buccinator's press
+    inward); pinned : (p,) int64; tied : the rim's vertices tied to the bones with
+    stiffness ``tie`` (Pinned), (q,) int64.
+    """
+
+    names: tuple[str, ...]
+    kind: np.ndarray
+    attachment: np.ndarray
+    insertion: np.ndarray
+    centre_start: np.ndarray
+    centre_index: np.ndarray
+    ring: tuple[np.ndarray, ...]
+    zone: np.ndarray
+    falloff: np.ndarray
+    force: np.ndarray
+    pinned: np.ndarray
+    protrusion: np.ndarray
+    tied: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    tie: float = 0.0
+    jaw: JawRig | None = None
+    eyelids: tuple[EyelidRig, ...] = ()
+    source: str = ""
+    material: tuple[tuple[str, Any], ...] = ()  # the file's material fields (MuscleFile.material)
+
+    @property
+    def count(self) -> int:
+        """How many muscles (the controls are not counted)."""
+        return len(self.force)
+
+    @property
+    def controls(self) -> tuple[str, ...]:
+        return self.names[self.count:]
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)

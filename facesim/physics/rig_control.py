@@ -1,0 +1,96 @@
+"""Where the bones take the skin in a frame: the jaw turning about its hinge and the
+eyelids closing (facesim.physics.rig), and where the muscles' ends are as the bones move.
+``control`` makes a frame's controls from a row of activations, the bones placed.
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..config import NUMBA_OPTIONS
+from .layout import Control, ModelArrays
+from .muscles import LINEAR
+from .numerics import _frame_point
+
+
+def control(model: ModelArrays, activation: np.ndarray) -> Control:
+    """The controls of one activation row (copied: a solver writes the controls it blends
+    into it), the bones placed by ``_rig_control``."""
+    muscles = model.muscle_kind.shape[0]
+    c = Control(np.array(activation, dtype=np.float64), model.rest_position.copy(),
+                np.zeros(model.rest_position.shape[0]), np.empty((muscles, 3)), np.empty((muscles, 3)))
+    _rig_control(model, c)
+    return c
+
+
+@njit(**NUMBA_OPTIONS)
+def _rotate(px, py, pz, hx, hy, hz, ax, ay, az, angle):
+    """Point P turned by ``angle`` about the axis through H with unit direction A
+    (Rodrigues' formula)."""
+    vx, vy, vz = px - hx, py - hy, pz - hz
+    c, s = math.cos(angle), math.sin(angle)
+    dot = (ax * vx + ay * vy + az * vz) * (1.0 - c)
+    return (hx + vx * c + (ay * vz - az * vy) * s + ax * dot,
+            hy + vy * c + (az * vx - ax * vz) * s + ay * dot,
+            hz + vz * c + (ax * vy - ay * vx) * s + az * dot)
+
+
+@njit(**NUMBA_OPTIONS)
+def _rig_control(model, control):
+    """Where the jaw and eyelids (facesim.rig) take each vertex under the activations of
+    ``control``: its rest position slid over the eyeball by the lid closure c and the
+    levator's raise a (c Δ_close + a (1 - c) Δ_raise in cylindrical coordinates about the
+    eye's horizontal axis), then turned about the jaw hinge by w θ, into ``control.target``.
+    ``control.hold`` is the extra stiffness driving the lips and lid contours,
+    drive * min(1, 10 a) for the activation a of their control (a lid's: the larger of its
+    closure and its raise): zero while the jaw and lids are at rest. Then the muscles'
+    ends, from where the bones hold them (``_muscle_geometry``)."""
+    activation = control.activation
+    theta = model.jaw_max * activation[model.jaw_column] if model.jaw_column >= 0 else 0.0
+    for i in range(model.rest_position.shape[0]):
+        px, py, pz = model.rest_position[i, 0], model.rest_position[i, 1], model.rest_position[i, 2]
+        column = model.drive_column[i]
+        a = activation[model.lid_raise_column[i]] if model.lid_raise_column[i] >= 0 else 0.0
+        driving = max(activation[column], a) if column >= 0 else 0.0
+        control.hold[i] = model.drive * model.drive_weight[i] * min(1.0, 10.0 * driving)
+        if model.lid_column[i] >= 0:
+            c = activation[model.lid_column[i]]
+            a *= 1.0 - c  # the levator lets go as the lid closes: a blink closes a raised lid
+            if c != 0.0 or a != 0.0:
+                dy = py - model.lid_centre[i, 1]
+                dz = pz - model.lid_centre[i, 2]
+                phi = math.atan2(dy, dz) + c * model.lid_delta[i, 1] + a * model.lid_raise_delta[i, 1]
+                r = math.sqrt(dy * dy + dz * dz) + c * model.lid_delta[i, 2] + a * model.lid_raise_delta[i, 2]
+                px += c * model.lid_delta[i, 0] + a * model.lid_raise_delta[i, 0]
+                py = model.lid_centre[i, 1] + r * math.sin(phi)
+                pz = model.lid_centre[i, 2] + r * math.cos(phi)
+        if theta != 0.0 and model.jaw_weight[i] > 0.0:
+            h, a = model.jaw_hinge, model.jaw_axis
+            px, py, pz = _rotate(px, py, pz, h[0], h[1], h[2], a[0], a[1], a[2], model.jaw_weight[i] * theta)
+        control.target[i, 0] = px
+        control.target[i, 1] = py
+        control.target[i, 2] = pz
+    _muscle_geometry(model, control.target, control.origin, control.insertion_point)
+
+
+@njit(**NUMBA_OPTIONS)
+def _muscle_geometry(model, target, origin, insertion_point):
+    """The muscles' ends in the frame they act in (eq. 3.21's projection, or 3D), from
+    where the bones hold them (``target``): O is the mean of the muscle's centre vertices
+    (a linear muscle's attachment), I its insertion (a sphincter has none; I = O)."""
+    for m in range(model.muscle_kind.shape[0]):
+        for d in range(3):
+            origin[m, d] = 0.0
+        count = model.muscle_centre_start[m + 1] - model.muscle_centre_start[m]
+        for k in range(model.muscle_centre_start[m], model.muscle_centre_start[m + 1]):
+            _frame_point(target, model.muscle_centre_index[k], model.axis_x, model.axis_z, model.radius,
+                         model.uv_projection, insertion_point, m)
+            for d in range(3):
+                origin[m, d] += insertion_point[m, d] / count
+        if model.muscle_kind[m] == LINEAR:
+            _frame_point(target, model.muscle_insertion[m], model.axis_x, model.axis_z, model.radius,
+                         model.uv_projection, insertion_point, m)
+        else:
+            for d in range(3):
+                insertion_point[m, d] = origin[m, d]
