@@ -9,7 +9,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import FacesimError, InputError
-from .renderer.scene import RenderSettings, shared_renderer
+from .renderer.scene import shared_renderer
+from .renderer.settings import RenderSettings
 from .workers import worker_pool
 
 
@@ -43,9 +44,9 @@ def render_one(spec_path: Path, output: Path, settings: RenderSettings, backend:
                mesh: Path | None = None, muscles: Path | None = None, identity: int | None = None,
                face: Path | None = None) -> BatchResult:
     """Load, simulate, render and write one spec; errors become a result, not an exception."""
-    from .export.output import check_output, output_kind, write_animation
     from .animation.simulate import simulate
     from .animation.spec import load_spec
+    from .export.output import check_output, output_kind, write_animation
 
     try:
         spec = load_spec(spec_path).with_overrides(mesh=mesh, muscles=muscles, identity=identity, face=face)

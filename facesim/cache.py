@@ -1,5 +1,5 @@
 """Derived data kept between processes, as Numba keeps its compiled kernels: arrays that
-take long to compute from the shipped data (the head's skin weights, facesim.figure), in
+take long to compute from the shipped data (the head's skin weights, facesim.face.figure), in
 ``$FACESIM_CACHE``, else ``$XDG_CACHE_HOME/facesim``, else ``~/.cache/facesim``.
 
 An entry's name carries a hash of everything it was computed from, the code included, so

@@ -16,8 +16,8 @@ import numpy as np
 import typer
 
 from .errors import FacesimError, InputError
-from .workers import capped_jobs
 from .files import Terminated, check_destination, handling_termination, terminating_signal
+from .workers import capped_jobs
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
                   help="Anatomy-based facial expression animation: simulate a muscle-driven face and render it offscreen.")
@@ -63,8 +63,7 @@ def handled(command):
 
 def settings_from(size: str, camera: str, wireframe: bool = False, show_muscles: bool = False, antialias: bool = True,
                   framing: str = "face", look: str = "auto", onto: Path | None = None, supersample: bool = False):
-    from .renderer.scene import RenderSettings, parse_size
-
+    from .renderer.settings import RenderSettings, parse_size
     width, height = parse_size(size)
     return RenderSettings(width, height, camera, wireframe, show_muscles, antialias, framing, look, onto, supersample)
 
@@ -127,9 +126,9 @@ def render(
     blend: Optional[str] = typer.Option(None, "--blend", help="blend expressions, e.g. happy=0.6,surprise=0.4"),
 ):
     """Simulate one expression spec (or a blend of expressions) and render it."""
-    from .export.output import check_output, progress_bar, write_animation
     from .animation.simulate import simulate
     from .animation.spec import blend_spec, load_spec
+    from .export.output import check_output, progress_bar, write_animation
 
     positive(jobs, "--jobs")
     jobs = capped_jobs(jobs, notice)
@@ -258,8 +257,7 @@ def info(mesh: Optional[Path] = MESH, muscles: Optional[Path] = MUSCLES):
     from .face.loading import load_face
     from .face.muscle_file import load_muscles
     from .physics.muscles import SPHINCTER
-    from .renderer.scene import BACKENDS
-
+    from .renderer.settings import BACKENDS
     mesh_path = mesh or DEFAULT_MESH
     muscles = muscles or default_muscles(mesh_path)
     face = load_face(mesh_path)
@@ -273,7 +271,7 @@ def info(mesh: Optional[Path] = MESH, muscles: Optional[Path] = MUSCLES):
                f"{sphincters} sphincter), {len(muscle_set.pinned)} pinned vertices, "
                f"controls: {', '.join(muscle_set.controls) or 'none'}")
     for backend in BACKENDS:
-        result = subprocess.run([sys.executable, "-c", f"from facesim.render import probe; print(probe({backend!r}))"],
+        result = subprocess.run([sys.executable, "-c", f"from facesim.renderer.scene import probe; print(probe({backend!r}))"],
                                 capture_output=True, text=True, timeout=120)
         status = result.stdout.strip().splitlines()[-1] if result.stdout.strip() else f"fails: {result.stderr.strip()[-200:]}"
         typer.echo(f"backend {backend}: {status}")
@@ -292,11 +290,11 @@ def muscles_command(
     from rich.table import Table
 
     from .config import DEFAULT_MESH, default_muscles
-    from .face.material import face_model
+    from .export.plots import plot_muscles
     from .face.loading import load_face
+    from .face.material import face_model
     from .face.muscle_file import load_muscles
     from .physics.muscles import SPHINCTER
-    from .export.plots import plot_muscles
     from .physics.run import muscle_regions
     mesh = mesh or DEFAULT_MESH
     face = load_face(mesh)
@@ -338,12 +336,13 @@ def sheet(
     """Every expression at its apex in a labelled grid, the neutral face first: the last
     frame of an expression that eases in and holds, the strongest of a sequence. An
     expression that fails to simulate gets an empty cell saying where, and exit code 1."""
+    from .animation.simulate import simulate
+    from .animation.spec import load_spec
     from .batch import collect_specs
     from .errors import SimulationError
     from .export.plots import contact_sheet
-    from .renderer.scene import BACKGROUND, FaceRenderer
-    from .animation.simulate import simulate
-    from .animation.spec import load_spec
+    from .renderer.scene import FaceRenderer
+    from .renderer.settings import BACKGROUND
 
     positive(columns, "--columns")
     if output.suffix.lower() != ".png":
@@ -410,8 +409,7 @@ def dataset(
     """Render N labelled expressions (PNG + labels + manifest) for training recognisers."""
     from .dataset import DatasetSettings, build_dataset, dataset_sheet
     from .export.output import progress_bar
-    from .renderer.scene import parse_size
-
+    from .renderer.settings import parse_size
     width, height = parse_size(size)
     if face is not None:
         from .face.own_face import load_face_directory
@@ -466,8 +464,8 @@ def mesh_landmarks(
     from rich.console import Console
     from rich.table import Table
 
-    from .face.align import propose_landmarks
     from .config import HOPPER_MESH
+    from .face.align import propose_landmarks
     from .face.loading import load_mesh
     from .files import atomic_path
 
@@ -499,12 +497,12 @@ def mesh_align(
     (a similarity fit) and write it with the Hopper face's muscles carried to it by position."""
     import yaml
 
-    from .face.align import align, load_landmarks
     from .config import HOPPER_MESH, HOPPER_MUSCLES
+    from .face.align import align, load_landmarks
     from .face.loading import check_face, load_mesh, obj_text
     from .face.muscle_file import MuscleFile, load_muscles, muscles_as_points
-    from .schema import load_model
     from .files import atomic_path
+    from .schema import load_model
 
     muscles_out = muscles_out or output.with_suffix("").with_suffix(".muscles.yaml")
     for path in (output, muscles_out):

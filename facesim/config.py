@@ -53,7 +53,7 @@ def _key_numba_cache() -> None:
     wherever facesim is installed.
 
     Numba's cache knows a kernel is stale only when the kernel's own file changes: a
-    kernel of facesim.solver compiled with facesim.kernels' callees inlined is loaded
+    kernel of facesim.physics.solver compiled with facesim.physics' callees inlined is loaded
     again after kernels.py changes, and runs the old code (measured on 2026-12-02, a
     ``git pull`` over an editable install would do the same). And Numba files a kernel
     under a hash of its file's directory, so the same code in a second checkout, a wheel
@@ -106,7 +106,7 @@ def _data(name: str) -> Path:
 MESHES = _data("meshes")
 #: The library of expression specs (happy, surprise, ...), found by name from any spec.
 LIBRARY = _data("expressions")
-#: The default face: ICT FaceKit's head (facesim.head), simulated through the Hopper face.
+#: The default face: ICT FaceKit's head (facesim.face.head), simulated through the Hopper face.
 HEAD = MESHES / "ict" / "head.npz"
 HEAD_MUSCLES = MESHES / "ict" / "head.muscles.yaml"
 #: The Hopper face (468 vertices, the scale of the thesis's HIGEM): the thesis's timing

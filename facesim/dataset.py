@@ -14,7 +14,7 @@ the number of workers or the order they finish in:
   degrees, the lights scaled by a factor uniform in [0.8, 1.2], and the head and eyes
   turned (``POSE_JITTER``: head yaw ±20, pitch ±10, roll ±8, gaze yaw ±15, pitch ±10
   degrees, each uniform), and a new person: the head's identity from a seed drawn
-  uniformly (facesim.head: weights of ICT's 100 modes from the standard normal), recorded
+  uniformly (facesim.face.head: weights of ICT's 100 modes from the standard normal), recorded
   in the label with its weights.
 
 Each sample is simulated for 20 frames (the activations easing in over 10) and its last
@@ -45,8 +45,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FacesimError, InputError, SimulationError
-from .workers import capped_jobs, worker_pool
 from .files import atomic_path
+from .workers import capped_jobs, worker_pool
 
 #: Samples in flight per worker: enough to keep each busy, few enough that memory stays
 #: flat however many samples a run asks for.
@@ -58,7 +58,7 @@ SCHEDULER_ADDRESS = re.compile(r"((tcp|tls|ws|wss)://)?(\[[0-9a-fA-F:.]+\]|[\w.-
 
 BASIC = ("happy", "sad", "angry", "fear", "disgust", "surprise")
 FRAMES, ONSET = 20, 10
-#: The largest head and gaze angle drawn with ``jitter`` (degrees), in facesim.spec.POSE order.
+#: The largest head and gaze angle drawn with ``jitter`` (degrees), in facesim.animation.spec.POSE order.
 POSE_JITTER = {"head_yaw": 20.0, "head_pitch": 10.0, "head_roll": 8.0, "gaze_yaw": 15.0, "gaze_pitch": 10.0}
 #: With ``jitter`` each sample is a new person: an identity seed drawn below this.
 IDENTITY_SEEDS = 2**31
@@ -112,9 +112,9 @@ def sample_id(index: int) -> str:
 def make_sample(directory: str, index: int, settings: DatasetSettings) -> str:
     """Draw, simulate, render and write sample ``index``; returns its id. Skips a
     finished sample."""
-    from .face.head import identity_weights
     from .animation.simulate import model_for, simulate
     from .animation.spec import Spec
+    from .face.head import identity_weights
 
     root = Path(directory)
     sid = sample_id(index)
@@ -148,8 +148,8 @@ def _render_sample(root: Path, sid: str, animation, draw: dict, settings: Datase
     """Render a simulated sample, write its image (and clip); the label's fields for it."""
     import imageio.v3 as iio
 
-    from .renderer.scene import RenderSettings, shared_renderer
-
+    from .renderer.scene import shared_renderer
+    from .renderer.settings import RenderSettings
     renderer = shared_renderer(animation.rest, animation.faces, RenderSettings(settings.width, settings.height, look=settings.look),
                                settings.backend, animation.figure, animation.face)
     yaw, pitch, light = (draw[k] if settings.jitter else v for k, v in (("yaw", 0.0), ("pitch", 0.0), ("light", 1.0)))
@@ -321,8 +321,7 @@ def read_manifest(path: Path) -> list[dict]:
 
 def check_settings(settings: DatasetSettings) -> None:
     """Every setting checked before anything is written (dataset.json records them)."""
-    from .renderer.scene import BACKENDS, RenderSettings
-
+    from .renderer.settings import BACKENDS, RenderSettings
     if settings.seed < 0:
         raise InputError(f"--seed: expected a non-negative integer, got {settings.seed}")
     RenderSettings(settings.width, settings.height, look=settings.look).for_face(settings.face)  # --size, --look

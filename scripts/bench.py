@@ -27,17 +27,18 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 
+from conftest import held_apex  # noqa: E402  (tests/: the solvers' comparison the tests make)
+
 import facesim  # noqa: E402
+from facesim.animation.simulate import model_for  # noqa: E402
+from facesim.animation.spec import activation_table  # noqa: E402
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES  # noqa: E402
 from facesim.face.loading import load_mesh  # noqa: E402
-from facesim.physics.mesh import subdivide  # noqa: E402
 from facesim.face.material import MaterialSpec, face_model  # noqa: E402
 from facesim.face.muscle_file import MuscleFile, muscles_as_points, resolve_muscles  # noqa: E402
-from facesim.schema import load_model  # noqa: E402
-from facesim.animation.simulate import model_for  # noqa: E402
+from facesim.physics.mesh import subdivide  # noqa: E402
 from facesim.physics.run import run  # noqa: E402
-from facesim.animation.spec import activation_table  # noqa: E402
-from conftest import held_apex  # noqa: E402  (tests/: the solvers' comparison the tests make)
+from facesim.schema import load_model  # noqa: E402
 
 EXPRESSIONS = ROOT / "expressions"
 #: The thesis's tables run on the Hopper face (468 vertices, the scale of its 612-node
@@ -138,7 +139,8 @@ def simulate_seconds(name: str, repeats: int, **changes) -> list[float]:
 RENDER_CODE = """
 import json, os, sys, time, statistics
 import numpy as np, facesim
-from facesim.renderer.scene import FaceRenderer, RenderSettings
+from facesim.renderer.scene import FaceRenderer
+from facesim.renderer.settings import RenderSettings
 from facesim.export.output import write_frames
 names, size, repeats, backend = {names!r}, {size}, {repeats}, {backend!r}
 out = {{}}
@@ -321,7 +323,7 @@ def scaling(levels: int, repeats: int, plot: Path | None) -> tuple[str, dict]:
         mesh = subdivide(base, level) if level else base
         model = face_model(mesh, resolve_muscles(carried, mesh, f"level {level}"), spec.material)
         base_steps = base_steps or model.material.substeps
-        # a finer mesh takes more sub-steps per frame (facesim.model); keep the number of
+        # a finer mesh takes more sub-steps per frame (facesim.physics.model); keep the number of
         # steps of the default face's 35 frames by simulating fewer frames
         frames = max(4, round(35 * base_steps / model.material.substeps))
         table_ = activation_table(spec.with_overrides(frames=frames), model.muscles)
@@ -401,7 +403,8 @@ def vertex_orders(level: int, repeats: int) -> tuple[str, dict]:
 RENDER_FLOOR_CODE = """
 import json, time, statistics
 import numpy as np, facesim
-from facesim.renderer.scene import FaceRenderer, RenderSettings
+from facesim.renderer.scene import FaceRenderer
+from facesim.renderer.settings import RenderSettings
 size, repeats, frames = {size}, {repeats}, 35
 a = facesim.simulate(facesim.load_spec("expressions/happy.yaml"){face})
 r = FaceRenderer(a.rest, a.faces, RenderSettings(size, size), {backend!r})
@@ -421,7 +424,7 @@ print(json.dumps(dict(ours=statistics.median(ours), floor=statistics.median(floo
 PROCESSES_CODE = """
 import json, time, numpy as np, facesim
 from facesim.export.output import render_frames
-from facesim.renderer.scene import RenderSettings
+from facesim.renderer.settings import RenderSettings
 spec = facesim.load_spec("expressions/happy.yaml"){face}.with_overrides(frames={frames})
 a = facesim.simulate(spec)
 out = {{}}
@@ -452,7 +455,8 @@ from pathlib import Path
 import numpy as np, facesim
 from facesim.geometry import _vertex_normals
 from facesim.export.output import write_frames
-from facesim.renderer.scene import FaceRenderer, RenderSettings
+from facesim.renderer.scene import FaceRenderer
+from facesim.renderer.settings import RenderSettings
 from facesim.animation.simulate import model_for
 from facesim.physics.run import run
 from facesim.animation.spec import activation_table
@@ -519,7 +523,8 @@ import json, statistics, tempfile, time
 from pathlib import Path
 import facesim
 from facesim.export.output import write_animation
-from facesim.renderer.scene import FaceRenderer, RenderSettings
+from facesim.renderer.scene import FaceRenderer
+from facesim.renderer.settings import RenderSettings
 size, repeats = {size}, {repeats}
 root = Path(tempfile.mkdtemp())
 spec = facesim.load_spec("expressions/happy.yaml")
@@ -542,7 +547,7 @@ print(json.dumps(dict(vertices=a.model.vertex_count, frames=a.frames, sim=sim, a
 def overlap(size: int, repeats: int) -> tuple[str, dict]:
     """Happy on the default head written to MP4 as `facesim render` does, the simulation
     run first and then drawn, against the simulation run in the background while its
-    frames are drawn and encoded (facesim.simulate), alternating in one process, renderer
+    frames are drawn and encoded (facesim.animation.simulate), alternating in one process, renderer
     warm."""
     f = python_json(OVERLAP_CODE.format(size=size, repeats=repeats))
     rows = [["the default head", f"{f['vertices']:,}", f["frames"], f"{f['sim'] * 1e3:,.0f}", f"{f['after'] * 1e3:,.0f}",
@@ -567,15 +572,15 @@ def head(sizes: list[int], repeats: int) -> tuple[str, dict]:
                   "MP4 encode alone (ms)", "end-to-end fps", "end-to-end fps, --supersample",
                   "end-to-end fps, --no-antialias"], rows)
     text += (f"\n\nThe head draws {h['vertices']:,} vertices and {h['triangles']:,} triangles ({h['backend']}); "
-             f"its skin is simulated on {h['simulated']} vertices (facesim.head). The floor uploads the same "
+             f"its skin is simulated on {h['simulated']} vertices (facesim.face.head). The floor uploads the same "
              "vertex buffers, computed before the clock starts, and renders the same scene with the same renderer "
              "and antialiasing: "
-             "facesim's frame adds the skin's interpolation (facesim.figure), the jaw, the eyelid contact and the "
+             "facesim's frame adds the skin's interpolation (facesim.face.figure), the jaw, the eyelid contact and the "
              "normals, computed for each frame on a second thread while the frame before it draws, which is also "
              "where each drawn frame is filtered while the next one draws (FaceRenderer.frames, as `facesim render` "
              f"draws an animation). Building the head's figure the first time in a process: {h['build']:.2f} s (its skin "
              "weights read from facesim's on-disk cache; solving for them takes about 1.2 s, once per machine). "
-             "Antialiasing filters each frame along its edges (facesim.render, an FXAA-style pass); --supersample "
+             "Antialiasing filters each frame along its edges (facesim.renderer, an FXAA-style pass); --supersample "
              "renders at twice the size and averages, 4 samples per pixel. Simulation: median of warm "
              f"runs; render and encode: medians of {repeats}; end-to-end fps: 35 frames over the wall time of "
              "simulating and writing the MP4 as `facesim render` does (frames stream to the encoder while the next "
@@ -592,9 +597,7 @@ def _looped():
     """A compiled loop over one kernel, so a profile's figures carry no call overhead."""
     from numba import njit
 
-    from facesim.physics import solver
-
-    from facesim.physics import bending, damping, muscle_forces, repulsion, springs, tissue
+    from facesim.physics import bending, damping, muscle_forces, repulsion, solver, springs, tissue
 
     @njit
     def looped(which, repeats, model, xp, control, work, forces, krylov, h):
@@ -704,7 +707,7 @@ script.
     may number them (1.99x in the run before, 422 -> 267 ns first). With two threads it
     gains more: 706 -> 540 ms (below, `prange`).
   - `facesim render` simulates on a thread of its own and draws each frame as soon as it
-    is simulated (facesim.simulate: `simulate(background=True)`, `Animation.ready`); the
+    is simulated (facesim.animation.simulate: `simulate(background=True)`, `Animation.ready`); the
     same bits as a simulation run first, a divergence still fails the render at its frame
     with nothing written, a failed render stops the simulation (tests/test_simulation.py).
     Only where Numba's threading layer lets two threads start parallel loops at once
@@ -751,7 +754,7 @@ script.
 
 - **This evening (2026-12-03): the head's preconditioner by blocks, an animation's frames
   drawn two in flight, the muscles' back-projection inlined.**
-  - The implicit step's preconditioner, the rest system's LU factors (facesim.solver),
+  - The implicit step's preconditioner, the rest system's LU factors (facesim.physics.solver),
     took two thirds of the head's step: two triangular solves entry by entry, 170 µs each
     time and about four times a step. The vertices are now put in a minimum-degree order
     of their own graph with each vertex's three coordinates together, so that the factors
@@ -782,7 +785,7 @@ script.
 
 - **Rendering (2026-12-03, afternoon).** Three changes to how facesim drives pyrender,
   each drawing the same pixels (max difference 0), each measured side by side in one
-  process on the head at 512² (facesim.render): the lit shader loops over the scene's
+  process on the head at 512² (facesim.renderer): the lit shader loops over the scene's
   two lights as a constant compiled in (`DIRECTIONAL_LIGHTS`), not pyrender's uniform
   count, which Mesa runs under a mask of the pixels still in the loop (31.6 -> 28.8 and
   34.4 -> 27.4 ms a frame); the programs set a uniform only when its value changes,
@@ -917,7 +920,7 @@ script.
 - **Compiling, measured apart.** Numba hands a parallel loop every tuple its body names,
   whole; the model's 67 fields cost each loop about 3 s of compiling (a one-line loop:
   3.9 s against 1.0 with its array taken out first). Since 2026-12-03 each term takes
-  out what it reads before its loop (facesim.kernels): every kernel compiled in 143 s ->
+  out what it reads before its loop (facesim.physics): every kernel compiled in 143 s ->
   79 s on this machine, the test suite from a fresh clone 954 -> 717 s. A kernel taking
   the model still costs about 0.4 s more to compile than one taking a few arrays
   (measured on a one-line kernel: 0.70 s against 0.28), about 13 s of the whole over the
@@ -1072,14 +1075,14 @@ def main() -> int:
     text, solver_figures = solvers(repeats, list(THESIS_31)[:2] if quick else list(THESIS_31))
     section("The two solvers, side by side", text + "\n\nThe thesis's quasi-implicit update (eq. 3.14-3.20, "
             "per-vertex stiffness) needs 4 steps per frame; the implicit step (the whole stiffness, conjugate "
-            "gradients: facesim.solver) is stable at 1. The skin's bending (facesim's default, not in the thesis) "
+            "gradients: facesim.physics.solver) is stable at 1. The skin's bending (facesim's default, not in the thesis) "
             "couples four vertices per hinge, which only the implicit step carries: on the head the reference is "
             "the same model at eight steps per frame with its conjugate gradients run to 1e-8. Simulation: median "
             "of warm runs. Apex: each expression's strongest frame held 200 frames, the mean of the last 50, the "
             "largest vertex distance between the two.")
     text, profile_figures = profile(1 if quick else 5)
     section("Where a step's time goes", text + "\n\nThe default head's skin has bending, so its conjugate "
-            "gradients are preconditioned by its system at rest, factorised once (facesim.solver); the Hopper "
+            "gradients are preconditioned by its system at rest, factorised once (facesim.physics.solver); the Hopper "
             "face's, in the thesis's model, by the system's diagonal. Medians of compiled loops; iterations over "
             "happy's 35 frames.")
     text, compile_figures = compilation(quick)
@@ -1093,7 +1096,7 @@ def main() -> int:
     text, scale = scaling(1 if quick else 4, repeats, None if quick else ROOT / "docs" / "scaling.png")
     section("Scaling: the Hopper face Loop-subdivided (muscles carried by position)", text +
             "\n\nA finer mesh of the same face takes more sub-steps per frame (its lighter vertices oscillate "
-            "faster: `facesim.model`); each row simulates about as many steps as the default face's 35 frames." +
+            "faster: `facesim.physics.model`); each row simulates about as many steps as the default face's 35 frames." +
             ("" if quick else "\n\n![cost per vertex-step](docs/scaling.png)"))
     text, order_figures = vertex_orders(1 if quick else 3, repeats)
     section("Vertex order", text + "\n\nA mesh of at least 4,000 vertices is simulated in an order of its own "

@@ -4,7 +4,7 @@ Grace Hopper that matplotlib ships (or from any photo given on the command line)
     python scripts/build_face_mesh.py                 # -> meshes/face.obj
     python scripts/build_face_mesh.py photo.jpg -o my_face.obj [--no-symmetrise]
 
-Needs MediaPipe (pip install -e '.[photo]'; `make mesh` does it). See facesim/photo.py
+Needs MediaPipe (pip install -e '.[photo]'; `make mesh` does it). See facesim/face/photo.py
 for the steps and meshes/NOTICE for the provenance.
 """
 

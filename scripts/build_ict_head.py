@@ -14,7 +14,7 @@ facesim loads in a few milliseconds:
   (:func:`landmarks_on_head`), the handle the simulation moves; ``landmark_vertex`` and
   ``landmark_weight`` (468, 8): where each landmark lies, as weights of head vertices
   (:func:`symmetric_weights`), the simulation mesh's rest; ``simulation_triangles``
-  (852, 3): MediaPipe's tessellation of them, the simulation mesh (facesim.figure);
+  (852, 3): MediaPipe's tessellation of them, the simulation mesh (facesim.face.figure);
 - ``identity_deltas`` (100, 26719, 3) float16: all of ICT's identity modes (13 MB
   compressed), a new face being neutral + Σ wᵢ · deltaᵢ.
 

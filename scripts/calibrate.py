@@ -29,7 +29,7 @@ contact, alone and in 12 pairs. Re-run from the file's values, that search keeps
 The chin raiser's muscles (AU17: the mentalis and the lower incisivi) are shared with the
 lip press (AU24): ``--also AU24`` joins the press's loss to the raiser's. What the file
 holds came from a joint Nelder-Mead of the two units' losses over the lower incisivi's
-force, falloff, zone and push and AU24's weights (facesim.timeline), held 200 frames,
+force, falloff, zone and push and AU24's weights (facesim.animation.timeline), held 200 frames,
 with the mentalis searched before without its push (2026-12-02: AU17 0.89, AU24 0.81);
 the lower incisivi's placement (insertion on the lower lip at landmark 85, attachment
 at the mentalis's insertion, 201, where the incisive fossa lies under the skin) was
@@ -57,14 +57,14 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from facesim.animation.calibration import FRAMES, compare, hold, on_face  # noqa: E402
+from facesim.animation.timeline import ACTION_UNITS  # noqa: E402
+from facesim.config import HEAD, HEAD_MUSCLES  # noqa: E402
 from facesim.errors import InputError, SimulationError  # noqa: E402
 from facesim.face.figure import figure_for  # noqa: E402
-from facesim.config import HEAD, HEAD_MUSCLES  # noqa: E402
 from facesim.face.loading import load_face  # noqa: E402
-from facesim.physics.mesh import mirror_map  # noqa: E402
 from facesim.face.material import MaterialSpec, face_model  # noqa: E402
 from facesim.face.muscle_file import MuscleFile, resolve_muscles  # noqa: E402
-from facesim.animation.timeline import ACTION_UNITS  # noqa: E402
+from facesim.physics.mesh import mirror_map  # noqa: E402
 
 DATA = ROOT / "tests" / "data" / "ict_action_units.npz"
 #: Placement search: insertions among the vertices ICT moves most on the muscle's side,

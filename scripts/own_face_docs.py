@@ -60,13 +60,14 @@ def enlarged(image: np.ndarray, factor: int = 2) -> np.ndarray:
 
 
 def main() -> None:
-    from facesim.cli import apex_frame
-    from facesim.face.own_face import face_from_photo, load_face_directory
-    from facesim.face.photo import read_image
-    from facesim.export.plots import contact_sheet
-    from facesim.renderer.scene import FaceRenderer, RenderSettings
     from facesim.animation.simulate import simulate
     from facesim.animation.spec import Envelope, Spec, Track, load_spec
+    from facesim.cli import apex_frame
+    from facesim.export.plots import contact_sheet
+    from facesim.face.own_face import face_from_photo, load_face_directory
+    from facesim.face.photo import read_image
+    from facesim.renderer.scene import FaceRenderer
+    from facesim.renderer.settings import RenderSettings
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "faces")

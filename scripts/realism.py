@@ -28,8 +28,19 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from facesim.animation.calibration import (  # noqa: E402
+    AMPLITUDE,
+    COSINE,
+    FACE_AREA,
+    FRAMES,
+    ICT_SHAPES,
+    MOVES,
+    ONSET,
+    TOP,
+    compare,
+    ict_displacement,
+)
 from facesim.config import HEAD_MUSCLES, HOPPER_MESH  # noqa: E402
-from facesim.animation.calibration import AMPLITUDE, COSINE, FACE_AREA, FRAMES, ICT_SHAPES, MOVES, ONSET, TOP, compare, ict_displacement  # noqa: E402
 
 #: The compact calibration data the tests read (tests/data/README.md).
 CALIBRATION_DATA = ROOT / "tests" / "data" / "ict_action_units.npz"
@@ -142,8 +153,8 @@ def main() -> int:
     if args.calibration_data:
         write_calibration_data(shapes, CALIBRATION_DATA)
         return 0
-    from facesim.renderer.scene import FaceRenderer, RenderSettings
-
+    from facesim.renderer.scene import FaceRenderer
+    from facesim.renderer.settings import RenderSettings
     rows, passed, panels = [], 0, []
     renderer = crop = None
     for au in ICT_SHAPES:

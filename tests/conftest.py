@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 import facesim
+from facesim.animation.simulate import model_for
+from facesim.animation.spec import activation_table
 from facesim.config import DEFAULT_MESH, DEFAULT_MUSCLES
 from facesim.face.loading import load_mesh
 from facesim.face.muscle_file import load_muscles
-from facesim.animation.simulate import model_for
 from facesim.physics.run import run
-from facesim.animation.spec import activation_table
 
 ROOT = Path(__file__).resolve().parent.parent
 EXPRESSIONS = ROOT / "expressions"

@@ -49,7 +49,7 @@ def repulsion_terms(x, xp, vertex, edge, rest, k0, zeta, unit=1.0):
 
 
 def bending_terms(xp, target, hinge, weight, kb):
-    """The bending energy E = ½ k_b Σ_e |Σ_k w_ek (X_k - target_k)|² (kernels._bending_forces):
+    """The bending energy E = ½ k_b Σ_e |Σ_k w_ek (X_k - target_k)|² (bending._bending_forces):
     its force -∂E/∂X and the scalar stiffness of eq. 3.19, -k_b Σ_e w_ek² at each vertex."""
     bend = np.einsum("ek,ekd->ed", weight, (xp - target)[hinge])
     force = np.zeros_like(xp)
@@ -195,7 +195,7 @@ def muscle_geometry(model, target):
 
 
 def rig_targets(model, activation):
-    """Where the jaw and eyelids take each vertex (facesim.rig): the lid closure c and the
+    """Where the jaw and eyelids take each vertex (facesim.physics.rig): the lid closure c and the
     levator's raise a slide a vertex in cylindrical coordinates (x, φ, r) about its eye's
     horizontal axis by c Δ_close + a (1 - c) Δ_raise; then the jaw turns it by its weight w times θ = activation × max
     angle about the hinge axis. And the drive holding the lips and lid contours:

@@ -3,14 +3,15 @@
 import numpy as np
 import pytest
 import yaml
+from conftest import EXPRESSIONS
 
 import facesim
-from conftest import EXPRESSIONS
+from facesim.animation.spec import POSE, activation_table, load_spec, pose_table
 from facesim.errors import InputError
 from facesim.physics.mesh import mirror_map
-from facesim.renderer.scene import BACKGROUND, FaceRenderer, RenderSettings
 from facesim.physics.run import run
-from facesim.animation.spec import POSE, activation_table, load_spec, pose_table
+from facesim.renderer.scene import FaceRenderer
+from facesim.renderer.settings import BACKGROUND, RenderSettings
 
 LIP_PAIRS = [(13, 14), (82, 87), (81, 178), (80, 88)]
 LIDS = [(159, 145), (386, 374)]
@@ -35,7 +36,7 @@ def distance(positions, a, b):
 def opening(positions, upper, lower):
     """How far apart a lid pair is across the eye, in the plane the lids close in (y, z:
     they turn about the eyeball's horizontal axis); a closed pair may lie along the closed
-    lid line apart, as the lower lid slides a millimetre toward the nose (facesim.rig)."""
+    lid line apart, as the lower lid slides a millimetre toward the nose (facesim.physics.rig)."""
     return np.linalg.norm(positions[..., upper, 1:] - positions[..., lower, 1:], axis=-1)
 
 
@@ -62,7 +63,7 @@ def test_a_sphincter_pulls_its_ring_toward_its_centre_and_stays_symmetric(model,
 
 def test_the_lips_do_not_pass_through_each_other_under_the_sphincter(model):
     """The sphincter presses the lips together until they meet; each pair then stays its
-    gap apart across the plane the lips meet along (its contact normal, facesim.rig)."""
+    gap apart across the plane the lips meet along (its contact normal, facesim.physics.rig)."""
     positions, *_ = run(model, ramp_table(model, 40, orbicularis_oris=rise(40, 10)), 0.01)
     a = model.arrays
     pairs = {(int(u), int(l)): k for k, (u, l) in enumerate(zip(a.contact_upper, a.contact_lower))}
@@ -211,9 +212,9 @@ def test_a_tied_rim_gives_between_a_pinned_and_a_free_one(tmp_path, mesh):
     rim gives: pinned, it stays put (the crease at the mask's edge); tied (the default
     head's), it moves; free, it moves further, held by the hypodermis alone."""
     from facesim.animation.calibration import hold
-    from facesim.config import DEFAULT_MUSCLES
     from facesim.animation.simulate import model_for
     from facesim.animation.spec import Spec
+    from facesim.config import DEFAULT_MUSCLES
 
     rim = mesh.boundary_loops[0]
     forehead = rim[mesh.vertices[rim, 1] > np.percentile(mesh.vertices[:, 1], 80)]

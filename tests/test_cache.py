@@ -39,8 +39,8 @@ def test_an_unwritable_cache_only_costs_time(tmp_path, monkeypatch):
 
 
 def test_the_heads_skin_weights_read_from_the_cache_are_the_computed_ones(tmp_path, monkeypatch):
-    from facesim.face import figure
     from facesim.config import HEAD
+    from facesim.face import figure
     from facesim.face.head import load_head
 
     monkeypatch.setenv("FACESIM_CACHE", str(tmp_path))
@@ -57,9 +57,9 @@ def test_the_heads_skin_weights_read_from_the_cache_are_the_computed_ones(tmp_pa
 COMPILED = """
 import importlib, sys
 import numpy as np
-kernels = importlib.import_module(sys.argv[1] + ".kernels")
-assert kernels._not_finite(np.array([[0.0, 1.0, 2.0], [3.0, np.nan, 5.0]])) == 1
-print(sum(kernels._not_finite.stats.cache_hits.values()), sum(kernels._not_finite.stats.cache_misses.values()))
+numerics = importlib.import_module(sys.argv[1] + ".physics.numerics")
+assert numerics._not_finite(np.array([[0.0, 1.0, 2.0], [3.0, np.nan, 5.0]])) == 1
+print(sum(numerics._not_finite.stats.cache_hits.values()), sum(numerics._not_finite.stats.cache_misses.values()))
 """
 
 

@@ -10,9 +10,9 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 import yaml
+from conftest import EXPRESSIONS, THESIS_EXPRESSIONS, cpu_seconds, wait_for
 
 import facesim as facesim_api
-from conftest import EXPRESSIONS, THESIS_EXPRESSIONS, cpu_seconds, wait_for
 
 SMALL = ["--size", "160x160"]
 
@@ -230,7 +230,7 @@ def test_bad_options_and_unwritable_output(tmp_path):
 
 def test_no_gl_backend_names_the_package_to_install(tmp_path):
     spec = write_spec(tmp_path)
-    code = ("import facesim.renderer.scene as r; r.backend_available = lambda name: False; "
+    code = ("import facesim.renderer.backend as r; r.backend_available = lambda name: False; "
             f"from facesim.cli import app; app(['render', {str(spec)!r}, '-o', {str(tmp_path / 'a.mp4')!r}])")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     one_line_error(result, 1, "no working GL backend", "apt-get install libosmesa6")

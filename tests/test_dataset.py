@@ -11,6 +11,7 @@ pytest.importorskip("dask.distributed")
 
 import numpy as np  # noqa: E402
 from conftest import wait_for  # noqa: E402
+
 from facesim.dataset import POSE_JITTER, DatasetSettings, build_dataset, read_manifest, sample  # noqa: E402
 from facesim.errors import InputError  # noqa: E402
 
@@ -46,10 +47,11 @@ def test_every_renderer_of_a_head_draws_the_same_pixels():
     """A sample is the same bytes in any process. pyrender ordered a head's parts by their
     memory addresses, and the blended eyelashes showed it: this draw (seed 7, sample 9)
     came out one of two ways, a pixel apart, from renderer to renderer."""
-    from facesim.dataset import FRAMES, ONSET, available_action_units
-    from facesim.renderer.scene import FaceRenderer, RenderSettings
     from facesim.animation.simulate import model_for, simulate
     from facesim.animation.spec import Spec
+    from facesim.dataset import FRAMES, ONSET, available_action_units
+    from facesim.renderer.scene import FaceRenderer
+    from facesim.renderer.settings import RenderSettings
 
     draw = sample(7, 9, available_action_units(model_for(Spec(frames=FRAMES, onset=ONSET)).muscles.names))
     animation = simulate(Spec(frames=FRAMES, onset=ONSET, identity=draw["identity"], aus=draw["aus"]))
@@ -104,7 +106,6 @@ def test_a_second_run_skips_finished_samples(tmp_path):
 def test_clips_hold_every_frame_and_end_on_the_image(tmp_path):
     import imageio.v3 as iio
     import numpy as np
-
     from test_cli import mp4_frames
 
     build_dataset(tmp_path, 2, DatasetSettings(seed=7, width=64, height=64, clip=True), jobs=1)

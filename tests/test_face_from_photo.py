@@ -1,6 +1,6 @@
 """`facesim face from-photo`: ICT's head and a camera fitted to a photo's landmarks, the
-photo baked into the head's texture, the face directory (facesim.fit, facesim.bake,
-facesim.own_face)."""
+photo baked into the head's texture, the face directory (facesim.face.fit, facesim.face.bake,
+facesim.face.own_face)."""
 
 import importlib.util
 
@@ -8,14 +8,15 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 import yaml
-
 from conftest import spec
-from facesim.face.align import similarity
+
+from facesim.animation.simulate import model_for, simulate
 from facesim.config import HEAD
 from facesim.errors import InputError
-from facesim.face.head import load_head
-from facesim.animation.simulate import model_for, simulate
+from facesim.face.align import similarity
 from facesim.face.figure import figure_for
+from facesim.face.head import load_head
+
 pytestmark = pytest.mark.skipif(importlib.util.find_spec("mediapipe") is None,
                                 reason="MediaPipe not installed (pip install -e '.[photo]')")
 
@@ -55,8 +56,8 @@ def test_fitted_landmarks_fall_on_the_photos(photos, name):
 
 def render_head(identity, yaw=0.0, size=512):
     model = model_for(spec("happy").with_overrides(identity=identity))
-    from facesim.renderer.scene import FaceRenderer, RenderSettings
-
+    from facesim.renderer.scene import FaceRenderer
+    from facesim.renderer.settings import RenderSettings
     with FaceRenderer(model.rest_position, model.faces, RenderSettings(size, size, framing="head"),
                       figure=figure_for(model)) as renderer:
         return renderer.render(model.rest_position, pose=[yaw, 0, 0, 0, 0])
@@ -213,8 +214,8 @@ def onto_frames(face, photo, expression_or_spec, frames=()):
     """The chosen frames of an expression rendered through the face's fitted camera into its
     photo (the pipeline of `facesim render SPEC --face DIR --onto PHOTO`)."""
     from facesim.face.photo import read_image
-    from facesim.renderer.scene import FaceRenderer, RenderSettings
-
+    from facesim.renderer.scene import FaceRenderer
+    from facesim.renderer.settings import RenderSettings
     height, width = read_image(photo).shape[:2]
     animation = simulate(expression_or_spec.with_overrides(face=face))
     settings = RenderSettings(width, height, look="photo", onto=photo)
@@ -263,8 +264,8 @@ def test_a_blink_closes_the_photos_eyes_and_an_open_mouth_shows_teeth(faces, pho
     (light, unsaturated pixels) where the photo had closed lips: the lower incisors' edge,
     measured 17 pixels (27 with the jaw's hinge in the head's coordinates, 2 mm from the
     contour points' axis used now)."""
-    from facesim.face.photo import detect_landmarks, read_image
     from facesim.animation.spec import Spec
+    from facesim.face.photo import detect_landmarks, read_image
 
     photo = read_image(photos["hopper"])
     blink = Spec(name="blink", frames=20, onset=10, aus={"AU45": 1.0})
@@ -297,8 +298,8 @@ def test_the_photo_look_draws_the_baked_photo(faces, photos):
     """--look photo on the default camera: the nose tip's pixel takes the photo's colour
     there (the texture, unlit), --look clay facesim's skin; a face directory brings its
     identity (the fitted head's own shape)."""
-    from facesim.renderer.scene import FaceRenderer, RenderSettings
-
+    from facesim.renderer.scene import FaceRenderer
+    from facesim.renderer.settings import RenderSettings
     animation = simulate(spec("happy").with_overrides(face=faces["hopper"]))
     record = yaml.safe_load((faces["hopper"] / "face.yaml").read_text())
     assert np.allclose(animation.model.mesh.head.vertices, load_head(HEAD, record["identity"]).vertices)

@@ -8,8 +8,10 @@ import pytest
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
 from facesim.errors import InputError
 from facesim.face.loading import load_mesh
-from facesim.physics.mesh import mirror_map
 from facesim.face.muscle_file import load_muscles
+from facesim.physics.mesh import mirror_map
+
+
 @pytest.fixture(scope="module")
 def mesh():
     """These tests are about the committed Hopper face (the default head simulates it)."""
@@ -76,8 +78,9 @@ def test_loading_a_missing_or_unreadable_mesh_is_one_line(tmp_path):
 
 @needs_mediapipe
 def test_make_mesh_rebuilds_the_committed_face(tmp_path):
-    from facesim.face.photo import mesh_from_photo
     import matplotlib.cbook
+
+    from facesim.face.photo import mesh_from_photo
 
     photo = matplotlib.cbook.get_sample_data("grace_hopper.jpg", asfileobj=False)
     rebuilt = mesh_from_photo(photo, tmp_path / "face.obj")

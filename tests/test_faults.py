@@ -15,13 +15,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-
 from conftest import cpu_seconds, wait_for
+from test_cli import SMALL, facesim, one_line_error, write_spec
+
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
 from facesim.face.loading import load_mesh, obj_text
-from facesim.physics.mesh import FaceMesh
 from facesim.files import Terminated
-from test_cli import SMALL, facesim, one_line_error, write_spec
+from facesim.physics.mesh import FaceMesh
 
 
 def tree(root: Path) -> dict:

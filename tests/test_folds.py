@@ -2,7 +2,7 @@
 
 On the default head, each FACS action unit facesim drives, alone at 1.0 and with every
 other at 1.0, and each expression of the library at its apex, is held 200 frames: no
-triangle may invert in any frame (kernels._triangle_checks: turned against its rest
+triangle may invert in any frame (checks._triangle_checks: turned against its rest
 normal and folded against the skin around it), and the face must come to rest: kinetic
 energy at the end below 1e-6 of its peak, or one named mode that is bounded.
 
@@ -36,14 +36,14 @@ import itertools
 
 import numpy as np
 import pytest
-
 from conftest import spec
+
 from facesim.animation.calibration import hold
-from facesim.config import LIBRARY
 from facesim.animation.simulate import model_for
-from facesim.physics.run import run
 from facesim.animation.spec import Spec, activation_table
 from facesim.animation.timeline import ACTION_UNITS
+from facesim.config import LIBRARY
+from facesim.physics.run import run
 
 HELD = 200
 SETTLED = 1e-6

@@ -8,14 +8,15 @@ import itertools
 
 import numpy as np
 import pytest
-
 from conftest import THESIS_EXPRESSIONS, spec
+
+from facesim.animation.simulate import simulate
 from facesim.config import HEAD, HEAD_MUSCLES
 from facesim.errors import InputError
-from facesim.face.head import load_head
-from facesim.renderer.scene import FaceRenderer, RenderSettings
-from facesim.animation.simulate import simulate
 from facesim.face.figure import figure_for
+from facesim.face.head import load_head
+from facesim.renderer.scene import FaceRenderer
+from facesim.renderer.settings import RenderSettings
 
 #: Vertex positions read off the upstream generic_neutral_mesh.obj (its v lines 1, 5000,
 #: 9409, 17040, 21452, 26719): face, face, last face vertex, first tooth, first sclera
@@ -153,7 +154,7 @@ def test_a_renderer_that_skips_unchanged_uniforms_draws_each_change_of_view(monk
     """facesim's programs set a uniform only when its value changes (render._remember_uniforms):
     turned, lit and posed frame after frame, a renderer draws what one that sets every
     uniform before every part (pyrender's way) draws, and every change shows."""
-    import facesim.renderer.scene
+    import facesim.renderer.backend
 
     animation = simulate(spec("happy"))
     last = animation.frames - 1
@@ -162,7 +163,7 @@ def test_a_renderer_that_skips_unchanged_uniforms_draws_each_change_of_view(monk
     drawn = {}
     for way in ("remembered", "every uniform"):
         if way == "every uniform":
-            monkeypatch.setattr(facesim.render, "_remember_uniforms", lambda program: setattr(program, "_facesim_uniforms", None))
+            monkeypatch.setattr(facesim.renderer.backend, "_remember_uniforms", lambda program: setattr(program, "_facesim_uniforms", None))
         with FaceRenderer.of(animation, RenderSettings(96, 96)) as renderer:
             drawn[way] = []
             for view, pose in zip(views, gaze):
@@ -308,7 +309,8 @@ def test_closing_a_renderer_collects_no_garbage():
 OFFSCREEN = """
 import sys
 import numpy as np
-from facesim.renderer.scene import FaceRenderer, RenderSettings
+from facesim.renderer.scene import FaceRenderer
+from facesim.renderer.settings import RenderSettings
 rest = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 with FaceRenderer(rest, np.array([[0, 1, 2]]), RenderSettings(32, 32)) as renderer:
     drawn = renderer.render(rest).std() > 0

@@ -1,23 +1,33 @@
 """Every Numba kernel against its NumPy reference in tests/naive.py, on perturbed states,
 with the switches on and off, including degenerate inputs."""
 
+import naive
 import numba
 import numpy as np
 import pytest
 import yaml
-
-import naive
 from conftest import material, spec
-from facesim.physics import solver
-from facesim.physics import bending, checks, layout, muscle_forces, numerics, repulsion, rig_control, springs, tissue
+
+from facesim.animation.simulate import model_for
+from facesim.animation.spec import activation_table
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES, PARALLEL_FROM
 from facesim.face.loading import load_mesh, write_obj
-from facesim.physics.mesh import subdivide
 from facesim.face.muscle_file import MuscleFile, muscles_as_points
-from facesim.schema import load_model
-from facesim.animation.simulate import model_for
+from facesim.physics import (
+    bending,
+    checks,
+    layout,
+    muscle_forces,
+    numerics,
+    repulsion,
+    rig_control,
+    solver,
+    springs,
+    tissue,
+)
+from facesim.physics.mesh import subdivide
 from facesim.physics.run import run
-from facesim.animation.spec import activation_table
+from facesim.schema import load_model
 
 RTOL = 1e-9
 
@@ -360,7 +370,7 @@ def test_non_finite_values_are_found_under_fastmath(bad):
 
 
 def dense_stiffness(links, n):
-    """K (3n, 3n) assembled from the links the terms wrote (kernels.Forces), plainly."""
+    """K (3n, 3n) assembled from the links the terms wrote (arrays.Forces), plainly."""
     k = np.kron(np.diag(links.diagonal), np.eye(3))
     for node, weight, a, along, across in zip(links.node, links.weight, links.axis, links.along, links.across):
         block = along * np.outer(a, a) + across * (np.eye(3) - np.outer(a, a))
@@ -470,7 +480,7 @@ def test_back_projection_turns_continuously_with_the_force(model):
 
 
 def test_muscle_regions_kept_between_steps_follow_the_bones(rng):
-    """A workspace keeps each muscle's region while the bones stay (kernels.Workspace):
+    """A workspace keeps each muscle's region while the bones stay (arrays.Workspace):
     the forces through a reused workspace, after the jaw and lids have moved, are those of
     a fresh one, and while the bones stay the kept regions are used, not found again."""
     model = model_for(spec("surprise"))

@@ -3,16 +3,16 @@ simulated in an order of its own, and everything a user sees stays in the mesh's
 
 import numpy as np
 import pytest
+from conftest import material, spec
 
 import facesim.physics.model as model_module
-from conftest import material, spec
-from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
-from facesim.face.material import face_model
-from facesim.physics.layout import ModelArrays
-from facesim.face.loading import load_face
-from facesim.face.muscle_file import load_muscles
-from facesim.physics.run import muscle_forces, run
 from facesim.animation.spec import activation_table
+from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
+from facesim.face.loading import load_face
+from facesim.face.material import face_model
+from facesim.face.muscle_file import load_muscles
+from facesim.physics.layout import ModelArrays
+from facesim.physics.run import muscle_forces, run
 
 
 def test_every_field_of_the_kernels_arrays_is_carried_to_a_new_order_one_way():

@@ -3,13 +3,14 @@
 import numpy as np
 import pytest
 import yaml
-
 from conftest import EXPRESSIONS
+
 from facesim.config import DEFAULT_MUSCLES, HOPPER_MESH, HOPPER_MUSCLES
 from facesim.errors import InputError
 from facesim.face.loading import load_mesh
 from facesim.face.muscle_file import load_muscles
 from facesim.physics.muscles import LINEAR
+
 THESIS_MUSCLES = [
     "frontalis_medial", "frontalis_lateral", "frontalis_outer", "corrugator_supercilii",
     "levator_labii_superioris", "levator_labii_superioris_alaeque_nasi", "zygomaticus_major",
@@ -148,9 +149,9 @@ def test_a_muscle_file_brings_the_material_its_forces_were_set_on_and_a_spec_win
     moving skin): a spec without a material gets that skin, a spec's own fields win, and a
     bad field in the file is one line naming the file."""
     import facesim
+    from facesim.animation.simulate import model_for
     from facesim.config import HOPPER_MESH
     from facesim.face.material import MaterialSpec
-    from facesim.animation.simulate import model_for
     spec = facesim.load_spec(EXPRESSIONS / "happy.yaml").with_overrides(mesh=HOPPER_MESH)
     model = model_for(spec)
     assert (model.material.bending, model.material.regions) == (0.0, "moving")

@@ -18,7 +18,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import EXPRESSIONS, THESIS_EXPRESSIONS
 
 GOLDEN = Path(__file__).with_name("data") / "golden_outputs.json"

@@ -6,19 +6,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import yaml
+from conftest import EXPRESSIONS, THESIS_EXPRESSIONS
+from test_simulation import assert_expression_reads
 
 import facesim
-from conftest import EXPRESSIONS
 from facesim.animation.simulate import model_for
+from facesim.animation.spec import load_spec
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
 from facesim.face.loading import load_mesh, write_obj
-from facesim.physics.mesh import subdivide
 from facesim.face.material import MaterialSpec, over_muscle_file
 from facesim.face.muscle_file import MuscleFile, muscles_as_points
+from facesim.physics.mesh import subdivide
 from facesim.schema import load_model
-from facesim.animation.spec import load_spec
-from conftest import THESIS_EXPRESSIONS
-from test_simulation import assert_expression_reads
 
 
 @pytest.fixture(scope="module")
@@ -104,9 +103,10 @@ def turned(points, degrees_yaw=25.0, degrees_pitch=10.0, scale=10.0, shift=(3.0,
 
 
 def test_align_brings_a_turned_scan_in_millimetres_into_the_face_frame(tmp_path, subdivided):
+    from test_cli import facesim as cli
+
     from facesim.face.align import NAMED_LANDMARKS
     from facesim.physics.mesh import FaceMesh
-    from test_cli import facesim as cli
     fine = load_mesh(subdivided[0])
     scan = tmp_path / "scan.obj"
     write_obj(scan, FaceMesh(turned(fine.vertices), fine.faces))

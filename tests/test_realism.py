@@ -17,13 +17,13 @@ import numpy as np
 import pytest
 
 from facesim.animation.calibration import AMPLITUDE, COSINE, ICT_SHAPES, compare, hold, on_face
-from facesim.config import HEAD
-from facesim.face.head import load_head
-from facesim.face.material import face_model
 from facesim.animation.simulate import model_for
-from facesim.face.figure import figure_for
 from facesim.animation.spec import Spec
 from facesim.animation.timeline import ACTION_UNITS
+from facesim.config import HEAD
+from facesim.face.figure import figure_for
+from facesim.face.head import load_head
+from facesim.face.material import face_model
 
 DATA = Path(__file__).parent / "data" / "ict_action_units.npz"
 #: Units within the bounds on the default head (REALISM.md).
@@ -86,7 +86,7 @@ def test_a_muscles_push_moves_the_skin_off_its_surface_as_far_as_icts(au, muscle
     """ICT's pucker (AU18) moves the lips about 1 cm forward, its dimpler (AU14) the lip
     corners half a centimetre back into the cheek. A muscle pulls in the plane of the
     muscles' projection (eq. 3.21), which the back-projection onto the curved face carries
-    little off its surface; the muscle's protrusion (kernels._muscle_forces) pushes along
+    little off its surface; the muscle's protrusion (muscle_forces._muscle_forces) pushes along
     the skin's rest normal, outward for the incisivi's pout, inward for the buccinator
     pressing the cheek to the teeth. Measured at the 10 simulated vertices ICT moves most
     off the face (depth): the pucker 0.79 of ICT's depth against 0.36 without its push
@@ -114,7 +114,7 @@ def test_a_lower_lip_pushed_up_slides_forward_over_the_upper_one(head_model):
     """ICT's chin raiser (AU17) moves the inner lower lip 6.9 mm up and 5.5 mm forward
     and leaves the upper lip still: the lower lip slides up the upper one's front rather
     than lifting it. The lips' contact keeps each pair apart across a plane turned
-    ``contact_tilt`` degrees (facesim.rig): under AU17 the pair's relative motion lies in
+    ``contact_tilt`` degrees (facesim.physics.rig): under AU17 the pair's relative motion lies in
     that plane, and the upper lip rises less than half as far as across a horizontal one,
     which the lower lip can only lift."""
     raw, flat = head_file_and_model_with(head_model, lambda raw: raw["jaw"].update(contact_tilt=0.0))

@@ -3,16 +3,16 @@ thesis's ablations and divergence reporting."""
 
 import numpy as np
 import pytest
+from conftest import THESIS_EXPRESSIONS, material, spec
 
 import facesim
-from conftest import THESIS_EXPRESSIONS, material, spec
-from facesim.errors import SimulationError
+from facesim.animation.simulate import model_for
+from facesim.animation.spec import activation_table
 from facesim.config import HOPPER_MESH
+from facesim.errors import SimulationError
 from facesim.face.loading import load_mesh
 from facesim.physics.mesh import mirror_map
-from facesim.animation.simulate import model_for
 from facesim.physics.run import run
-from facesim.animation.spec import activation_table
 
 MOUTH_CORNERS = (61, 291)
 BROWS = (105, 334, 70, 300)
@@ -227,7 +227,7 @@ def test_a_mesh_simulated_on_every_core_is_simulated_before_its_frames_are_drawn
     6,990-vertex face rendered slower, not faster (facesim.animation.simulate.simulate)."""
     import sys
 
-    simulate_module = sys.modules["facesim.simulate"]  # the module: facesim.simulate is the function
+    simulate_module = sys.modules["facesim.animation.simulate"]  # the module: facesim.animation.simulate is the function
 
     assert facesim.simulate(spec("happy", frames=3), background=True).progress is not None
     monkeypatch.setattr(simulate_module, "PARALLEL_FROM", 0)  # the Hopper face as if it were large

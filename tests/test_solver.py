@@ -1,6 +1,6 @@
 """The physics core: a force term is one kernel and one line (gravity is added to a copy
-of the package exactly so, a kernel appended to kernels.py and a line in solver._forces,
-and the face sags under it, not while it weighs nothing); and the implicit solver, at
+of the package exactly so, a module of its own in facesim/physics with its kernel, and a
+line in solver._forces, and the face sags under it, not while it weighs nothing); and the implicit solver, at
 one step per frame, holds each expression where the thesis's update at four does."""
 
 import os
@@ -11,11 +11,15 @@ import textwrap
 
 import numpy as np
 import pytest
-
 from conftest import THESIS_EXPRESSIONS, held_apex, material, spec
+
 from facesim.config import PROJECT_DIR
 
-GRAVITY = '''
+GRAVITY = '''"""A toy term: gravity."""
+
+from numba import njit
+
+from ..config import NUMBA_OPTIONS
 
 
 @njit(**NUMBA_OPTIONS)
@@ -24,8 +28,9 @@ def _gravity_forces(model, forces):
     for i in range(forces.force.shape[0]):
         forces.force[i, 1] -= model.mass * 100.0
 '''
-LINE = "    kernels._gravity_forces(model, forces)  # a toy term\n"
-ANCHOR = "    kernels._muscle_forces(model, xp, control, work, forces)  # eq. 3.1-3.4, 3.21-3.25\n"
+LINE = "    gravity._gravity_forces(model, forces)  # a toy term\n"
+TERMS = "from . import (\n"
+ANCHOR = "    muscle_forces._muscle_forces(model, xp, control, work, forces)  # eq. 3.1-3.4, 3.21-3.25\n"
 
 SAG = textwrap.dedent("""
     import numpy as np
@@ -53,8 +58,9 @@ def sag(package_root, spec, cache=None):
 
 
 def test_a_force_term_is_one_kernel_and_one_line_and_a_changed_kernel_is_compiled_again(tmp_path):
-    """Gravity added to a copy of the package as one kernel and one line: weightless, the
-    face stays at rest; given its weight by a change to kernels.py alone, the face sags.
+    """Gravity added to a copy of the package as one kernel and one line (its module,
+    named among the solver's terms): weightless, the face stays at rest; given its
+    weight by a change to its module alone, the face sags.
     The second run is the same command with the same Numba cache and solver.py untouched,
     so it also shows that the solver's compiled kernels, which carry the force terms
     inside them, are compiled again when a term changes instead of loaded stale
@@ -63,17 +69,17 @@ def test_a_force_term_is_one_kernel_and_one_line_and_a_changed_kernel_is_compile
     shutil.copytree(PROJECT_DIR / "facesim", copy, ignore=shutil.ignore_patterns("__pycache__"))
     for data in ("meshes", "expressions"):
         (copy / data).symlink_to(PROJECT_DIR / data)
-    kernels = (copy / "kernels.py").read_text()
+    term = copy / "physics" / "gravity.py"
     assert GRAVITY.count("* 100.0") == 1
-    (copy / "kernels.py").write_text(kernels + GRAVITY.replace("* 100.0", "* 0.0"))
-    solver = (copy / "solver.py").read_text()
-    assert solver.count(ANCHOR) == 1
-    (copy / "solver.py").write_text(solver.replace(ANCHOR, ANCHOR + LINE))
+    term.write_text(GRAVITY.replace("* 100.0", "* 0.0"))
+    solver = (copy / "physics" / "solver.py").read_text()
+    assert solver.count(ANCHOR) == 1 and solver.count(TERMS) == 1
+    (copy / "physics" / "solver.py").write_text(solver.replace(ANCHOR, ANCHOR + LINE).replace(TERMS, TERMS + "    gravity,\n"))
 
     spec = tmp_path / "still.yaml"
     spec.write_text("name: still\nframes: 20\nactivations: {}\n")
     weightless = sag(tmp_path, spec, tmp_path / "cache")
-    (copy / "kernels.py").write_text(kernels + GRAVITY)
+    term.write_text(GRAVITY)
     with_gravity = sag(tmp_path, spec, tmp_path / "cache")
     assert abs(weightless) < 1e-9  # nothing moves a face at rest
     # a weight of 100 against the tissue springs alone (k = 300 per vertex) would sag 0.33
@@ -103,10 +109,10 @@ def test_the_thesis_preset_is_the_thesis_model(tmp_path):
     its update at four steps per frame, no bending; fields the spec gives still win.
     Happy in it, on the Hopper face, moves the face and folds nothing."""
     import facesim
-    from facesim.config import HOPPER_MESH
     from facesim.animation.simulate import model_for
-    from facesim.physics.run import run
     from facesim.animation.spec import activation_table
+    from facesim.config import HOPPER_MESH
+    from facesim.physics.run import run
 
     path = tmp_path / "thesis_happy.yaml"
     path.write_text((PROJECT_DIR / "expressions" / "happy.yaml").read_text()

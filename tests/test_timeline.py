@@ -3,15 +3,15 @@
 import numpy as np
 import pytest
 import yaml
+from conftest import EXPRESSIONS
 
 import facesim
-from conftest import EXPRESSIONS
-from facesim.config import HOPPER_MUSCLES
-from facesim.errors import InputError
-from facesim.face.muscle_file import MuscleFile, resolve_muscles
 from facesim.animation.simulate import model_for
 from facesim.animation.spec import activation_table, blend_spec, load_spec
 from facesim.animation.timeline import interpolate
+from facesim.config import HOPPER_MUSCLES
+from facesim.errors import InputError
+from facesim.face.muscle_file import MuscleFile, resolve_muscles
 
 PEAK = ([0, 10, 20], [0.0, 1.0, 0.0])
 PLATEAU = ([0, 10, 20, 30], [0.0, 1.0, 1.0, 0.0])

@@ -14,7 +14,7 @@ at least ``MOVES``:
 
 On the default head the simulated vertices are MediaPipe's landmarks, vertex k lying on
 ICT's vertex ``Head.landmarks[k]``. facesim's field is compared where the head shows it,
-carried over its face area by the head's follow (``on_face``, facesim.figure), against
+carried over its face area by the head's follow (``on_face``, facesim.face.figure), against
 ICT's full shape there, as ``scripts/realism.py`` does; the tests read ICT's shape from
 ``tests/data/ict_action_units.npz`` (about 35 kB per unit over the face area, and its
 value at the landmark vertices, which ``scripts/calibrate.py`` fits to). ICT's
@@ -96,7 +96,7 @@ def compare(ours: np.ndarray, theirs: np.ndarray) -> Comparison:
 class Held:
     """An action unit simulated and held: the simulated vertices' displacement at the
     last frame (n, 3), as the head shows it (a lid landmark's motion scaled to the head's
-    own opening, facesim.figure); the most inverted triangles in any frame; and the
+    own opening, facesim.face.figure); the most inverted triangles in any frame; and the
     kinetic energy at the end over its peak (how far from settled)."""
 
     displacement: np.ndarray
@@ -108,7 +108,7 @@ class Held:
 
 def on_face(figure, displacement: np.ndarray) -> np.ndarray:
     """(FACE_AREA, 3): a displacement of the simulated vertices (n, 3) carried over the
-    head's face area as the head shows it (facesim.figure's follow)."""
+    head's face area as the head shows it (facesim.face.figure's follow)."""
     out = np.zeros((FACE_AREA, 3))
     rows = figure.follow_rows < FACE_AREA
     out[figure.follow_rows[rows]] = (figure.follow @ displacement)[rows]
@@ -117,11 +117,11 @@ def on_face(figure, displacement: np.ndarray) -> np.ndarray:
 
 def hold(model, au: str | tuple[str, ...], intensity: float = 1.0, frames: int = FRAMES, figure=None) -> Held:
     """Simulate ``au`` alone (or several units together) on ``model``
-    (facesim.model.Model), eased in and held. ``figure``: the head it drives (default:
+    (facesim.physics.model.Model), eased in and held. ``figure``: the head it drives (default:
     built for the model); a caller trying many muscle files on one head passes the one it
     built, whose follow they all share."""
-    from ..physics.run import run
     from ..face.figure import figure_for
+    from ..physics.run import run
     from .spec import Spec, activation_table
 
     units = (au,) if isinstance(au, str) else au

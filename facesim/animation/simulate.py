@@ -40,10 +40,10 @@ class Animation:
 
     positions : (frames, n, 3) cm; rest : (n, 3); faces : (t, 3);
     activations : (frames, M + controls); pose : (frames, 5) head and gaze angles in
-    degrees (facesim.spec.POSE), applied at render time; kinetic_energy, smallest_area :
+    degrees (facesim.animation.spec.POSE), applied at render time; kinetic_energy, smallest_area :
     (frames,) float; inverted : (frames,) int (triangles turned over and folded against
     the skin around them, ``checks._triangle_checks``); face : the face directory
-    (facesim.own_face.FaceDirectory) whose head this is, if any: its texture and camera;
+    (facesim.face.own_face.FaceDirectory) whose head this is, if any: its texture and camera;
     progress : set while it is simulated in the background (``ready``); muscle_force :
     (frames, n, 3) the muscles' forces on each frame (eq. 3.1-3.25), when simulated
     ``with_muscle_forces``.
@@ -102,7 +102,7 @@ class Animation:
 
     @property
     def figure(self):
-        """The head this animation's face drives (facesim.figure), or None for a mask."""
+        """The head this animation's face drives (facesim.face.figure), or None for a mask."""
         return None if self.model is None else figure_for(self.model)
 
     @property

@@ -7,7 +7,7 @@ time step. A spec is a YAML file validated by pydantic (unknown fields are error
     onset: 10                   # frames over which activations ease in (Parke's cosine)
     activations:                # muscle: activation in [0, 1]
       zygomaticus_major_l: 1.0
-    aus: {AU12: D}              # FACS action units (facesim.timeline)
+    aus: {AU12: D}              # FACS action units (facesim.animation.timeline)
     expressions: {joy: 0.5}     # MPEG-4 expressions by name
     timeline: [...]             # key-framed tracks of muscles, AUs, expressions, jaw, eyelids
     pose: [...]                 # key-framed head yaw/pitch/roll and gaze yaw/pitch (degrees)
@@ -27,11 +27,9 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
-from typing import Literal
-
 from pydantic import Field, PrivateAttr, ValidationError, field_validator, model_validator
 
 from ..config import DEFAULT_MESH, LIBRARY, default_muscles
@@ -39,8 +37,15 @@ from ..errors import InputError
 from ..face.material import MaterialSpec
 from ..physics.muscles import MuscleSet
 from ..schema import Strict, load_model
-from .timeline import (INTERPOLATIONS, MPEG4_FAPS, apply_cooccurrence, au_muscles, envelope_keys,
-                       interpolate, parse_intensity)
+from .timeline import (
+    INTERPOLATIONS,
+    MPEG4_FAPS,
+    apply_cooccurrence,
+    au_muscles,
+    envelope_keys,
+    interpolate,
+    parse_intensity,
+)
 
 Activation = Annotated[float, Field(ge=0.0, le=1.0)]
 #: More frames than this is taken for a typo: 100k frames is over an hour at 25 fps.
@@ -164,7 +169,7 @@ class Spec(Strict):
     mesh: Path | None = None
     muscles: Path | None = None
     identity: int | list[float] | None = Field(None, description=(
-        "a head's identity (facesim.head): a seed for weights from the standard normal distribution, or the weights"))
+        "a head's identity (facesim.face.head): a seed for weights from the standard normal distribution, or the weights"))
     face: Path | None = Field(None, description="a face directory written by `facesim face from-photo`")
     _source: Path | None = PrivateAttr(None)
 
@@ -225,7 +230,7 @@ class Spec(Strict):
 
     @property
     def face_directory(self):
-        """The spec's face directory read back (facesim.own_face.FaceDirectory), or None."""
+        """The spec's face directory read back (facesim.face.own_face.FaceDirectory), or None."""
         from ..face.own_face import load_face_directory
 
         return None if self.face is None else load_face_directory(self._relative(self.face, Path()), f"{self.source}: face")

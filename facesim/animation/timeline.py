@@ -71,7 +71,7 @@ def envelope_keys(start: float, onset: float, apex: float, offset: float, intens
 # --- FACS action units ----------------------------------------------------------------
 
 #: Action unit -> (name, muscles and how much of each). Muscles are given without side;
-#: an AU drives both sides. The jaw and the eyelids (facesim.rig) count as muscles here:
+#: an AU drives both sides. The jaw and the eyelids (facesim.physics.rig) count as muscles here:
 #: AU26 opens the jaw half way (half its max_angle), AU27 fully. AUs whose muscles the
 #: face does not have are errors.
 ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {

@@ -16,11 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from ..renderer.scene import FaceRenderer, RenderSettings, shared_renderer
 from ..animation.simulate import Animation
-from ..workers import worker_pool
+from ..errors import InputError
 from ..files import WriteError, atomic_path, check_destination, check_terminated
+from ..renderer.scene import FaceRenderer, shared_renderer
+from ..renderer.settings import RenderSettings
+from ..workers import worker_pool
 
 FULL_DISK = 1 << 20  # bytes free under which a short output is put down to a full disk
 KINDS = {".mp4": "mp4", ".gif": "gif", ".npz": "npz"}
@@ -34,7 +35,7 @@ def output_kind(path: Path) -> str:
 
 def check_output(path: Path, force: bool, settings: RenderSettings | None = None) -> str:
     """Validate an output path before any work: its kind, and that it may be written
-    (facesim.writers.check_destination: --force replaces only facesim's own outputs)."""
+    (facesim.files.check_destination: --force replaces only facesim's own outputs)."""
     kind = output_kind(path)
     if kind == "unknown":
         raise InputError(f"{path}: unknown output type {path.suffix!r} (use .mp4, .gif, .npz or a directory)")
@@ -246,7 +247,7 @@ def write_animation(animation: Animation, path: Path, settings: RenderSettings, 
 
 def render(animation: Animation, path: str | Path, settings: RenderSettings | None = None, force: bool = False,
            backend: str = "auto") -> RenderReport:
-    """Write an animation (facesim.simulate's) to ``path`` as ``facesim render -o`` does:
+    """Write an animation (facesim.animation.simulate's) to ``path`` as ``facesim render -o`` does:
     an MP4, GIF, NPZ or a directory of PNG frames by its name, drawn with ``settings``
     (512x512 from the front by default). ``force``: replace an output facesim wrote
     before. The path is checked before anything is drawn (InputError)."""

@@ -12,15 +12,15 @@ from ..files import atomic_path
 
 
 def _front_view(model, backend: str) -> tuple[np.ndarray | None, np.ndarray]:
-    """What the muscle map is drawn over: for a head (facesim.figure), its front render and
+    """What the muscle map is drawn over: for a head (facesim.face.figure), its front render and
     where each simulated vertex shows on it, centred, y up, in pixels; for a mask, nothing
     and its own x, y."""
     from ..face.figure import figure_for
     figure = figure_for(model)
     if figure is None:
         return None, model.rest_position[:, :2]
-    from ..renderer.scene import FaceRenderer, RenderSettings
-
+    from ..renderer.scene import FaceRenderer
+    from ..renderer.settings import RenderSettings
     settings = RenderSettings(900, 1000)
     with FaceRenderer(model.rest_position, model.faces, settings, backend, figure) as renderer:
         image = renderer.render(model.rest_position)

@@ -7,7 +7,7 @@ inner sphere (ICT's M_Iris, painted whole: pupil, iris and the white around them
 lays its parts out in UV tiles of their own (the face in [0, 1]², the back of the head in
 [1, 2] x [0, 1], ...) and the eyes' shells in the face's square, over one another;
 :func:`atlas_uv` moves each part's triangles, as the figure draws them
-(facesim.figure.drawn_rows: the sclera without its clear cornea), into its tile. Teeth, gums, tongue and lashes keep facesim's materials: a photo of a
+(facesim.face.figure.drawn_rows: the sclera without its clear cornea), into its tile. Teeth, gums, tongue and lashes keep facesim's materials: a photo of a
 closed mouth does not show them.
 
 Steps (:func:`bake`):
@@ -172,11 +172,11 @@ def _bake(texel_uv, corners, tile, group, pixels, depth, facing, vertex_colour, 
 
 
 def bake(head, camera, photo: np.ndarray, vertex_colour: np.ndarray, atlas=None) -> tuple[np.ndarray, np.ndarray]:
-    """The atlas (2 TILE, 3 TILE, 3) uint8 of ``head`` (facesim.head.Head, the fitted
-    identity) seen by ``camera`` (facesim.fit.Camera) in ``photo`` (h, w, 3) uint8, its
+    """The atlas (2 TILE, 3 TILE, 3) uint8 of ``head`` (facesim.face.head.Head, the fitted
+    identity) seen by ``camera`` (facesim.face.fit.Camera) in ``photo`` (h, w, 3) uint8, its
     layout ``atlas`` (``atlas_uv(head)``, found when not given).
     ``vertex_colour`` (N, 3+) in [0, 1], facesim's own colours of the head
-    (facesim.figure), paints the eyes' inner spheres where the photo does not show them,
+    (facesim.face.figure), paints the eyes' inner spheres where the photo does not show them,
     and any part the photo does not show at all. Also returns the atlas's --onto alpha
     (2 TILE, 3 TILE) uint8: where the photo saw a texel, how fully (the GRAZING weight:
     near the silhouette the photo, not the render, shows the head's edge, and the hair

@@ -30,14 +30,13 @@ from numba import njit, prange
 from scipy.sparse import coo_matrix, csr_matrix
 
 from .. import cache
-
-from ..physics import mesh
 from ..config import PARALLEL_OPTIONS
-from .head import Head, HeadMesh
-from ..physics.mesh import FaceMesh, smooth_interpolation, unique_edges
 from ..geometry import axis_rotation, rotation
+from ..physics import mesh
+from ..physics.mesh import FaceMesh, smooth_interpolation, unique_edges
 from ..physics.rig import LID_GAP
 from .colours import BROWS, CARUNCLE, GUMS, IRIS, LASHES, LIPS, MOUTH_SOCKET, PUPIL, SCLERA, SKIN, TEETH
+from .head import Head, HeadMesh
 
 #: ICT's parts drawn, with the colour (None: per vertex, see head_figure) and roughness of
 #: each; the lacrimal fluid, eye blend and eye occlusion shells exist for a shader's
@@ -68,7 +67,7 @@ class Part:
     name: str
     triangles: np.ndarray  # (t, 3) into Figure.rest
     roughness: float = 0.75
-    uv: np.ndarray | None = None  # (t, 3, 2) its corners in a face directory's texture atlas (facesim.bake), if textured
+    uv: np.ndarray | None = None  # (t, 3, 2) its corners in a face directory's texture atlas (facesim.face.bake), if textured
 
 
 @dataclass(frozen=True)
@@ -293,7 +292,7 @@ def _deep_mouth(head: Head) -> np.ndarray:
 
 
 def head_figure(head: Head, model) -> Figure:
-    """ICT's head driven by the simulation ``model`` of its skin (facesim.model.Model)."""
+    """ICT's head driven by the simulation ``model`` of its skin (facesim.physics.model.Model)."""
     sim_rest = model.rest_position
     x = head.vertices
     n_face = head.face_count

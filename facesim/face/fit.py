@@ -35,8 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .align import similarity
 from ..errors import InputError
+from .align import similarity
 from .head import IDENTITY_MODES, Head, _identity_deltas
 
 #: A landmark's uncertainty on the head (cm), the prior's weight against the landmarks:
@@ -99,7 +99,7 @@ class Camera:
         return float(np.degrees(np.arctan2(self.rotation[0, 2], self.rotation[2, 2])))
 
     def as_dict(self) -> dict:
-        return dict(model="pinhole on the head's axis (facesim.fit.Camera)", rotation=self.rotation.tolist(),
+        return dict(model="pinhole on the head's axis (facesim.face.fit.Camera)", rotation=self.rotation.tolist(),
                     translation=[float(v) for v in self.translation], scale=float(self.scale), kappa=float(self.kappa),
                     width=int(self.width), height=int(self.height))
 

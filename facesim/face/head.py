@@ -11,7 +11,7 @@ The thesis's single-layer skin is simulated on a face of MediaPipe's 468-landmar
 topology, the scale of the thesis's 612-node face: the Hopper face brought onto the head
 by a similarity fitted to where MediaPipe finds its landmarks on the head
 (:meth:`Head.simulation_mesh`). Landmark k moves the head's vertex ``landmarks[k]`` and
-the head's 9,409-vertex face area follows (facesim.figure). Measured against simulating
+the head's 9,409-vertex face area follows (facesim.face.figure). Measured against simulating
 the face area itself (9,409 vertices, 10 sub-steps): happy takes 0.75 s there against
 0.03 s, and folds 12 triangles at the lip corners (and surprise 14 in the forehead,
 blink 58 in the lids) under the same muscles and material; MediaPipe's measured
@@ -85,8 +85,8 @@ class Head:
         brought onto the head by the similarity that best fits its landmarks to the head's,
         then made exactly symmetric about x = 0 (the fit leaves it 1e-5 cm off, enough to
         make left and right muscles differ by round-off)."""
-        from .align import similarity
         from ..physics.mesh import mirror_map
+        from .align import similarity
         scale, rotation, translation = similarity(mask.vertices, self.landmark_positions)
         placed = scale * mask.vertices @ rotation.T + translation
         placed = 0.5 * (placed + placed[mirror_map(placed, mask.faces)] * np.array([-1.0, 1.0, 1.0]))
@@ -103,7 +103,7 @@ class Head:
 
 class HeadMesh(FaceMesh):
     """The simulation mesh of a head, which keeps the head it drives: the renderer draws
-    the head (facesim.figure)."""
+    the head (facesim.face.figure)."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, head: Head):
         super().__init__(vertices, faces)

@@ -17,6 +17,8 @@ from ..physics.model import Model
 from ..physics.muscles import MuscleSet
 from .material import MaterialSpec, face_model
 from .muscle_file import load_muscles
+
+
 def diagnose(mesh: FaceMesh) -> list[str]:
     """What stops a mesh from being a facesim face: each problem as one sentence. Run on
     every mesh before it is simulated, and by `facesim mesh info`."""
@@ -89,7 +91,7 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def load_mesh(path: str | Path, identity=None) -> FaceMesh:
     """Read a face mesh (OBJ, PLY, GLB, anything trimesh reads) without reordering vertices,
-    or a head archive (facesim.head, with an ``identity``)."""
+    or a head archive (facesim.face.head, with an ``identity``)."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: mesh file not found")
@@ -132,7 +134,7 @@ def obj_text(mesh: FaceMesh, header: str = "") -> str:
 
 
 def write_obj(path: str | Path, mesh: FaceMesh, header: str = "", replace: bool = True) -> None:
-    """Write an OBJ atomically (facesim.writers)."""
+    """Write an OBJ atomically (facesim.files)."""
     from ..files import atomic_path
 
     with atomic_path(path, replace=replace) as tmp:

@@ -25,8 +25,8 @@ from pydantic import Field, StrictInt, field_validator, model_validator
 from ..config import MIDLINE_FRACTION, SNAP_FRACTION
 from ..errors import InputError
 from ..physics.mesh import FaceMesh
+from ..physics.muscles import LINEAR, SPHINCTER, EyelidRig, JawRig, MuscleSet
 from ..schema import Strict, load_model
-from ..physics.muscles import EyelidRig, JawRig, LINEAR, MuscleSet, SPHINCTER
 
 #: A landmark: a vertex index (an integer: YAML's ``true`` is not vertex 1) or a 3D point.
 Point = Annotated[StrictInt, Field(ge=0)] | tuple[float, float, float]
@@ -97,9 +97,9 @@ class Jaw(_Contours):
     """The mandible: a rotation about the hinge axis through two points (the
     temporomandibular joints), ``max_angle`` degrees at activation 1. ``lower`` points
     follow it fully, ``upper`` points stay with the skull; the rest of the face follows
-    with a weight interpolated smoothly between them (facesim.rig). The two lists pair
+    with a weight interpolated smoothly between them (facesim.physics.rig). The two lists pair
     up, upper over lower: the lips' contacts, which meet across a plane turned
-    ``contact_tilt`` degrees from the horizontal, its normal leaning back (facesim.rig):
+    ``contact_tilt`` degrees from the horizontal, its normal leaning back (facesim.physics.rig):
     the lower lip pushed up slides forward over the upper one."""
 
     hinge: tuple[Point, Point]

@@ -1,8 +1,8 @@
 """Your own face on a full head: ``facesim face from-photo PHOTO -o DIR``.
 
-A photo in (:func:`face_from_photo`): MediaPipe's 468 landmarks (facesim.photo, offline),
-ICT's head fitted to them with a camera (facesim.fit), the photo baked into the fitted
-head's texture (facesim.bake). A face directory out, written whole or not at all (built
+A photo in (:func:`face_from_photo`): MediaPipe's 468 landmarks (facesim.face.photo, offline),
+ICT's head fitted to them with a camera (facesim.face.fit), the photo baked into the fitted
+head's texture (facesim.face.bake). A face directory out, written whole or not at all (built
 under a temporary name, read back, then renamed):
 
 - ``head.obj``, ``head.mtl``, ``head.png``: the fitted neutral head in ICT's vertex order
@@ -11,7 +11,7 @@ under a temporary name, read back, then renamed):
   gums and tongue, lashes, the eyes' shells) with facesim's colours; Blender and trimesh
   load it as it is;
 - ``head_onto.png``: for ``--onto``, how much of each texel the render shows over the
-  photo (facesim.bake: less where the photo saw it at a grazing angle);
+  photo (facesim.face.bake: less where the photo saw it at a grazing angle);
 - ``face.yaml``: the identity weights (ICT's 100 modes), the fitted camera, the photo it
   came from and how well the landmarks fit (the median and 90th percentile of their
   distance from MediaPipe's, in face widths);
@@ -35,14 +35,14 @@ from ..errors import InputError
 
 #: The files of a face directory (what ``--force`` may replace).
 FACE_FILES = frozenset({"head.obj", "head.mtl", "head.png", "head_onto.png", "face.yaml", "muscles.yaml"})
-#: Materials without texture, with the MTL colour each gets (facesim.figure's).
+#: Materials without texture, with the MTL colour each gets (facesim.face.figure's).
 HIDDEN = ("M_LacrimalFluid", "M_EyeBlend", "M_EyeOcclusion")
 
 
 @dataclass(frozen=True, eq=False)
 class FaceDirectory:
     """A face directory read back: where it is, the identity weights (100,) as a tuple,
-    the fitted camera (facesim.fit.Camera) and its files."""
+    the fitted camera (facesim.face.fit.Camera) and its files."""
 
     path: Path
     identity: tuple
@@ -143,7 +143,7 @@ def _colours():
 
 def head_obj(head, uv_rows: np.ndarray, uv: np.ndarray, header: str) -> tuple[str, str]:
     """The OBJ and MTL text of ``head`` with the atlas UVs ``uv`` (k, 3, 2) of its
-    triangles ``uv_rows`` (k,) (facesim.bake.atlas_uv's, by triangle index); the eyes'
+    triangles ``uv_rows`` (k,) (facesim.face.bake.atlas_uv's, by triangle index); the eyes'
     hidden shells are left out."""
     lines = [f"# {line}" for line in header.splitlines()] + ["mtllib head.mtl"]
     lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in head.vertices]
@@ -185,16 +185,14 @@ def face_from_photo(photo: str | Path, output: str | Path, replace: bool = False
     import imageio.v3 as iio
     import yaml
 
-    from ..config import VERSION
+    from ..config import HEAD, HEAD_MUSCLES, VERSION
+    from ..files import atomic_path
     from .bake import bake
-    from .figure import atlas_uv
-    from ..config import HEAD, HEAD_MUSCLES
+    from .figure import atlas_uv, figure_for
     from .fit import fit_head
     from .head import load_head
-    from .photo import detect_landmarks, read_image
-    from .figure import figure_for
     from .loading import load_face_model
-    from ..files import atomic_path
+    from .photo import detect_landmarks, read_image
 
     try:
         import mediapipe  # noqa: F401

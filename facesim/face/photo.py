@@ -76,7 +76,7 @@ def detect_landmarks(image: np.ndarray, source: str, notice=None, refine: bool =
     ``refine``: MediaPipe's attention model, which places the eyes' and lips' points more
     closely (its 10 iris points are dropped). The head's fit uses it; the 468-vertex
     masks keep the plain model, which built meshes/face.obj. Measured on 35 facesim renders of known
-    identities, fitting the head to them (facesim.fit): the whole head's RMS from the truth
+    identities, fitting the head to them (facesim.face.fit): the whole head's RMS from the truth
     falls from 0.387 to 0.382 cm (mean; median 0.385 to 0.362) on 30 identities, and from
     0.370 to 0.322 on five others."""
     height, width = image.shape[:2]

@@ -19,7 +19,7 @@ def _bending_forces(model, xp, control, forces):
         E = ½ k_b Σ_e (Σ_k w_ek U_k)²,  U = X - target (each coordinate),
 
     where w_e is the hinge's cotangent stencil scaled by √(3 / (A_0 + A_1)) at rest
-    (facesim.model), so Σ_k w_ek X_k measures the hinge's bend and vanishes on a flat one.
+    (facesim.physics.model), so Σ_k w_ek X_k measures the hinge's bend and vanishes on a flat one.
     Bergou et al. apply it to the positions of a flat sheet; a face is curved at rest, so
     here it acts on the displacement from where the bones hold the skin (the rest shape
     moved by the jaw and lids): zero at rest and under the rig, and for the small turns

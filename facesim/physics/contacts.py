@@ -12,7 +12,7 @@ from ..config import NUMBA_OPTIONS
 def _contacts(model, state):
     """Lips and lids do not pass through each other: each pair (upper, lower) is kept at
     least its gap apart along its contact normal n (straight up for the lids, turned back
-    for the lips: facesim.rig), by moving both half the overlap along n and giving them
+    for the lips: facesim.physics.rig), by moving both half the overlap along n and giving them
     their mean velocity along n (an inelastic contact; a single-layer mesh has no
     collisions). Across n they slide freely."""
     x, v, pinned = state.x, state.v, model.pinned

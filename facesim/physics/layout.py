@@ -12,15 +12,13 @@ A solver turns these into new velocities.
 
 from collections import namedtuple
 
-
 import numpy as np
 
 from ..config import CHUNKS
 
-
-#: The model's arrays and constants, as the kernels read them (facesim.model.Model.arrays).
+#: The model's arrays and constants, as the kernels read them (facesim.physics.model.Model.arrays).
 #: Shapes: n vertices, t triangles, s springs, r repulsion pairs, M muscles; the jaw and
-#: eyelid fields are facesim.rig.Rig's, the material's are facesim.model.Material's. The
+#: eyelid fields are facesim.physics.rig.Rig's, the material's are facesim.physics.material.Material's. The
 #: pairs' rest distances are Model.repulsion_rest_distance by corner (3, t), pair 3t + k
 #: at (k, t), for the vector loop of ``_repulsion_corners``.
 ModelArrays = namedtuple("ModelArrays", [
@@ -114,7 +112,7 @@ def forces(model: ModelArrays) -> Forces:
                   np.zeros((3, triangles)), np.zeros((3, model.spring_indices.shape[0])), np.zeros((9, triangles)))
 
 
-#: Status codes returned by ``facesim.solver._simulate``.
+#: Status codes returned by ``facesim.physics.solver._simulate``.
 OK, NOT_FINITE, INVERTED, RUNAWAY = 0, 1, 2, 3
 
 

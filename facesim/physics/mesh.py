@@ -13,7 +13,6 @@ from functools import cached_property
 import numpy as np
 
 
-
 def _readonly(a: np.ndarray) -> np.ndarray:
     a.flags.writeable = False
     return a

@@ -41,7 +41,7 @@ from ..errors import InputError
 from .layout import ModelArrays
 from .material import Material, resolved_material
 from .mesh import FaceMesh, csr_from_pairs, inverse_permutation
-from .muscles import MuscleSet, SPHINCTER
+from .muscles import SPHINCTER, MuscleSet
 from .rig import Rig, build_rig
 
 #: The default face's skin area per vertex (cm²): meshes/face.obj's 276.05 cm² over 468
@@ -58,7 +58,7 @@ class Model:
     faces: np.ndarray  # (t, 3)
     rest_normal: np.ndarray  # (t, 3) unit
     rest_area: np.ndarray  # (t,)
-    rest_against: np.ndarray  # (t,) bool: faces against the skin around it at rest (kernels._against_surroundings)
+    rest_against: np.ndarray  # (t,) bool: faces against the skin around it at rest (checks._against_surroundings)
     pinned: np.ndarray  # (n,) bool
     tie: np.ndarray  # (n,) stiffness tying a tied rim to the bones (muscles.Pinned), 0 elsewhere
     neighbour_start: np.ndarray  # (n+1,)
@@ -74,7 +74,7 @@ class Model:
     repulsion_edge: np.ndarray  # (r, 2)
     repulsion_rest_distance: np.ndarray  # (r,)
     hinge: np.ndarray  # (e, 4) interior edges' hinges: the edge's ends, then the two opposite vertices
-    hinge_weight: np.ndarray  # (e, 4) their bending stencils (kernels._bending_forces)
+    hinge_weight: np.ndarray  # (e, 4) their bending stencils (bending._bending_forces)
     muscle_kind: np.ndarray  # (M,) LINEAR or SPHINCTER
     muscle_axes: np.ndarray  # (M, 2) a sphincter's semi-axes in the muscle frame (cm)
     muscle_origin: np.ndarray  # (M, 3) attachment O (a sphincter's centre) at rest, in the muscle frame
@@ -107,7 +107,7 @@ class Model:
 
     def preconditioner(self, h: float):
         """The implicit step's factorised preconditioner at step ``h`` for a skin with
-        bending (facesim.solver.rest_preconditioner), factorised the first time a run asks
+        bending (facesim.physics.solver.rest_preconditioner), factorised the first time a run asks
         for it; empty (Jacobi, or the thesis's update) otherwise.
 
         Kept on disk (facesim.cache), keyed by every array and constant of the model, the
@@ -252,7 +252,6 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
     )
 
     from .muscle_forces import _muscle_frame
-
     from .rig_control import control
 
     rest = control(kernel_arrays, np.zeros(len(muscles.names)))  # O and I where the bones hold them at rest
@@ -283,7 +282,7 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
 #: (1 MB on the machines measured) and the order makes no difference.
 REORDER_FROM = 4000
 
-#: How ``reordered`` carries each field of the kernels' arrays (kernels.ModelArrays) to a
+#: How ``reordered`` carries each field of the kernels' arrays (arrays.ModelArrays) to a
 #: new vertex order: rows per vertex, vertex numbers as values, rows per spring, per
 #: triangle or per hinge, compressed rows per vertex, or unchanged (per muscle, scalars).
 #: Every field is named once (tests/test_model.py), so a new one cannot be forgotten.
@@ -390,7 +389,7 @@ def ellipse_axes(points: np.ndarray, where: str) -> tuple[float, float]:
 
 
 def vertex_normals(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(n, 3) the area-weighted unit vertex normals of a surface (kernels._vertex_normals)."""
+    """(n, 3) the area-weighted unit vertex normals of a surface (geometry._vertex_normals)."""
     from ..geometry import _vertex_normals
 
     out = np.empty((len(x), 3))

@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 
-
 LINEAR, SPHINCTER = 0, 1
 
 

@@ -32,7 +32,6 @@ from numba import njit, prange
 
 from ..config import CHUNKS, LENGTH_EPS, NUMBA_OPTIONS, PARALLEL_OPTIONS
 
-
 #: The exponent bits of a float64: all set for inf and NaN.
 EXPONENT = np.int64(0x7FF0000000000000)
 

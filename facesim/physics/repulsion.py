@@ -83,7 +83,7 @@ def _edge_repulsion_forces(model, xp, forces):
     potential in the point-to-line distance. Pair r is link s + r of K (s springs).
 
     Two passes, as the springs': triangle t's three pairs (3t, 3t + 1, 3t + 2: its
-    corners a, b, c against (b, c), (c, a), (a, b), facesim.model) give each corner its
+    corners a, b, c against (b, c), (c, a), (a, b), facesim.physics.model) give each corner its
     own R and its shares of the reactions on the two edges it ends, into
     ``corner_force`` (9, t) and ``corner_stiffness`` (3, t); then the corners' sums are
     added to the vertices (``_scatter_corners``). As the springs' (``_spring_forces``),

@@ -29,7 +29,7 @@ acting on top.
   as the lid closes, so a blink closes a raised lid.
 
 The jaw's lip lists and the lid contours are paired in order; each pair is also a contact
-(``kernels._contacts``): the upper vertex never drops below its lower partner, so a
+(``contacts._contacts``): the upper vertex never drops below its lower partner, so a
 sphincter pressing the lips together, or a closing lid, stops where they meet. "Below"
 is along the pair's contact normal: straight up for the lids; for the lips, turned back
 by the jaw's ``contact_tilt``, since closed lips meet across an inclined plane and a
@@ -47,6 +47,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from .mesh import FaceMesh, smooth_interpolation
 from .muscles import MuscleSet
 

@@ -38,7 +38,7 @@ def _rotate(px, py, pz, hx, hy, hz, ax, ay, az, angle):
 
 @njit(**NUMBA_OPTIONS)
 def _rig_control(model, control):
-    """Where the jaw and eyelids (facesim.rig) take each vertex under the activations of
+    """Where the jaw and eyelids (facesim.physics.rig) take each vertex under the activations of
     ``control``: its rest position slid over the eyeball by the lid closure c and the
     levator's raise a (c Δ_close + a (1 - c) Δ_raise in cylindrical coordinates about the
     eye's horizontal axis), then turned about the jaw hinge by w θ, into ``control.target``.

@@ -1,6 +1,6 @@
 """Solvers: from a State and the Forces the terms add, the next State (thesis section 3.4).
 
-``_forces`` is the list of physical terms (facesim.kernels), one line each: adding a
+``_forces`` is the list of physical terms (facesim.physics), one line each: adding a
 force term is one kernel there and one line here. A solver step reads the model, the
 state and the frame's control, and advances the state in place:
 
@@ -51,8 +51,20 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
-from . import bending, checks, contacts, damping, layout, muscle_forces, numerics, repulsion, rig_control, springs, tissue
 from ..config import NUMBA_OPTIONS, PARALLEL_OPTIONS
+from . import (
+    bending,
+    checks,
+    contacts,
+    damping,
+    layout,
+    muscle_forces,
+    numerics,
+    repulsion,
+    rig_control,
+    springs,
+    tissue,
+)
 from .layout import INVERTED, NOT_FINITE, OK, RUNAWAY
 from .mesh import inverse_permutation
 
@@ -202,7 +214,7 @@ def _system_entries(model, forces, h, place, rows, columns, values):
 
 
 def rest_preconditioner(model, h: float) -> Factor:
-    """The implicit step's preconditioner for ``model`` (facesim.model.Model) at step ``h``: its
+    """The implicit step's preconditioner for ``model`` (facesim.physics.model.Model) at step ``h``: its
     system A (``_system_entries``) with the terms at rest and the bones at rest, factorised
     by SuperLU (scipy.sparse.linalg.splu). A is symmetric positive definite, so the
     diagonal is kept as pivot; the order is minimum degree on the graph of the vertices
