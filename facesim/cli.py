@@ -104,8 +104,10 @@ def identity_seed(identity: Optional[int]) -> Optional[int]:
 @handled
 def render(
     spec: Optional[Path] = typer.Argument(None, help="expression spec (YAML); optional with --blend"),
-    output: Optional[Path] = typer.Option(None, "-o", "--output", help="out.mp4, out.gif, out.npz or a directory of PNGs (default out/<name>.mp4)"),
-    size: str = SIZE,
+    output: Optional[str] = typer.Option(None, "-o", "--output", help="out.mp4, out.gif, out.npz, out.png (one frame) "
+                                         "or a directory of PNGs (DIR/, or an existing directory; default out/<name>.mp4)"),
+    frame: Optional[int] = typer.Option(None, "--frame", help="with -o x.png: the frame to write (default: the apex)"),
+    size: Optional[str] = typer.Option(None, "--size", help="frame size WxH (default 512x512; with --onto, the photo's)"),
     fps: Optional[float] = typer.Option(None, "--fps", help="playback rate (default: the spec's, 25)"),
     camera: str = CAMERA,
     framing: str = FRAMING,
@@ -129,6 +131,7 @@ def render(
     from .animation.simulate import simulate
     from .animation.spec import blend_spec, load_spec
     from .export.output import check_output, progress_bar, write_animation
+    from .physics.run import compiled_here
 
     positive(jobs, "--jobs")
     jobs = capped_jobs(jobs, notice)
@@ -140,25 +143,38 @@ def render(
     if spec and blend:
         loaded = loaded.with_overrides(include=loaded.include + blend_spec(blend).include)
     loaded = loaded.with_overrides(mesh=mesh, muscles=muscles, identity=identity_seed(identity), face=face)
-    settings = settings_from(size, camera, wireframe, show_muscles, antialias, framing, look, onto, supersample)
+    if onto is not None and size is not None:
+        raise InputError(f"--size: not with --onto, whose frames take the photo's size; got --size {size}")
+    settings = settings_from(size or "512x512", camera, wireframe, show_muscles, antialias, framing, look, onto,
+                             supersample)
     settings.for_face(loaded.face_directory)  # before any work: the photo look and --onto need a face
     if onto is not None:  # the frames take the photo's size, and the photo is checked against the face
         from dataclasses import replace
 
-        from .face.own_face import onto_photo
+        from .face.own_face import ONTO_LIMIT, onto_photo
 
         height, width = onto_photo(loaded.face_directory, onto)[0].shape[:2]
+        if max(width, height) == ONTO_LIMIT:
+            from PIL import Image
+
+            with Image.open(onto) as photo:
+                if max(photo.size) > ONTO_LIMIT:
+                    notice(f"--onto: {onto} is {photo.size[0]}x{photo.size[1]}; drawn at {width}x{height} (frames "
+                           f"are at most {ONTO_LIMIT} pixels on their longer side)")
         settings = replace(settings, width=width, height=height)
-    output = output or Path("out") / f"{loaded.title}.mp4"
-    check_output(output, force, settings)
+    output = output or str(Path("out") / f"{loaded.title}.mp4")
+    kind = check_output(output, force, settings)
+    if frame is not None and (kind != "image" or not 0 <= frame < loaded.frames):
+        raise InputError(f"--frame: with -o x.png, a frame from 0 to {loaded.frames - 1}, got {frame}" if kind == "image"
+                         else f"--frame: only with a .png output (one frame), not {output}")
     # drawn and encoded as its frames come; the muscles' arrows take every frame at once
     animation = simulate(loaded, notice=notice, background=True, with_muscle_forces=show_muscles)
     try:
         with progress_bar(animation.frames, f"rendering {loaded.title}") as advance:
-            report = write_animation(animation, output, settings, fps, backend, jobs, advance, replace=force)
+            report = write_animation(animation, output, settings, fps, backend, jobs, advance, replace=force, frame=frame)
     finally:
         animation.cancel()  # after a failed render, the simulation stops too
-    compiled = " (the first run compiles the Numba kernels; later runs load them from cache)" if report.simulation_seconds > 3 else ""
+    compiled = " (this run compiled the Numba kernels; later runs load them from cache)" if compiled_here() else ""
     typer.echo(f"wrote {output}: {report.frames} frames, simulation {report.simulation_seconds * 1000:.1f} ms, "
                f"render {report.render_seconds:.2f} s{compiled}", err=True)
 
@@ -294,8 +310,8 @@ def muscles_command(
     from .face.loading import load_face
     from .face.material import face_model
     from .face.muscle_file import load_muscles
+    from .physics.model import muscle_regions
     from .physics.muscles import SPHINCTER
-    from .physics.run import muscle_regions
     mesh = mesh or DEFAULT_MESH
     face = load_face(mesh)
     model = face_model(face, load_muscles(muscles or default_muscles(mesh), face))
@@ -376,10 +392,10 @@ def sheet(
             same_face = (a.rest.shape == first.rest.shape and (a.rest == first.rest).all() and a.figure is first.figure
                          and a.face is first.face)
             if same_face:
-                images.append(renderer.frame(a, apex_frame(a)))
+                images.append(renderer.frame(a, a.apex_frame))
             else:
                 with FaceRenderer.of(a, settings, backend) as own:
-                    images.append(own.frame(a, apex_frame(a)))
+                    images.append(own.frame(a, a.apex_frame))
     contact_sheet(images, labels, output, columns, replace=force)
     typer.echo(f"wrote {output}: {len(images)} faces", err=True)
     for failure in failures:
@@ -546,20 +562,14 @@ def face_from_photo_command(
 ):
     """Fit the head (ICT's identity modes) and a camera to a photo's face and bake the
     photo into its texture. Needs facesim[photo]."""
-    from .face.own_face import FACE_FILES, face_from_photo
+    from .face.own_face import face_from_photo
 
-    check_destination(output, force, directory=True, names=FACE_FILES)
+    check_destination(output, force, directory=True)
     record = face_from_photo(photo, output, replace=force, notice=notice)
     fit = record["landmarks"]
     typer.echo(f"wrote {output}: the head fitted to {fit['face_width_pixels']:.0f} pixels of face, landmarks within "
                f"{100 * fit['median_residual_face_widths']:.1f}% of its width (median), "
                f"{100 * fit['p90_residual_face_widths']:.1f}% (90th percentile)", err=True)
-
-
-def apex_frame(animation) -> int:
-    """The last frame at which the total activation is largest."""
-    total = animation.activations.sum(axis=1)
-    return int(len(total) - 1 - np.argmax(total[::-1]))
 
 
 def main() -> None:

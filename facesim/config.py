@@ -96,6 +96,21 @@ def _key_numba_cache() -> None:
 _key_numba_cache()
 
 
+def _prefer_openmp() -> None:
+    """Numba's parallel loops on OpenMP before TBB, unless the user chose a layer
+    (``NUMBA_THREADING_LAYER`` or ``_PRIORITY``). Numba tries TBB first, and where the
+    ``tbb`` package is installed its pool writes "Unable to join threads to shut down
+    before fork()" on stdout each time a process forks, which every MP4 (ffmpeg started
+    by imageio-ffmpeg) does. OpenMP, which Debian's libgomp provides, writes nothing."""
+    import numba
+
+    if not ({"NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY"} & set(os.environ)):
+        numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
+
+
+_prefer_openmp()
+
+
 def _data(name: str) -> Path:
     """A data directory shipped with facesim: inside the package when installed from a
     wheel (pyproject.toml maps meshes/ and expressions/ there), beside it in a checkout."""

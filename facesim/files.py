@@ -1,13 +1,14 @@
 """Writing files without losing any: one rule for every output facesim makes.
 
 1. Before any work, :func:`check_destination` decides whether ``path`` may be written: it
-   must not exist, or, with ``--force``, be something facesim itself writes (a file of the
-   kind asked for, or a directory holding only frame PNGs), never the working directory or
-   one of its parents.
+   must not exist, or, with ``--force``, be something facesim itself wrote (a file of the
+   kind asked for; a directory whose manifest, ``MANIFEST``, lists every file in it with
+   the hash it still has), never the working directory or one of its parents.
 2. :func:`atomic_path` yields a temporary name in the destination directory, creating the
    missing parent directories it needs (and removing them again if the write fails).
 3. The caller writes there; an optional ``verify`` reads it back (an MP4 that ffmpeg can
    decode, a complete NPZ) before anything is replaced.
+   A directory gets its manifest before it is verified.
 4. The temporary is renamed into place: a file with ``link`` so that an output written
    meanwhile by another run is never clobbered without ``--force``; a replaced directory is
    first moved aside, so the old output exists until the new one does.
@@ -24,8 +25,9 @@ command line report any error that follows it as the signal it was.
 from __future__ import annotations
 
 import errno
+import hashlib
+import json
 import os
-import re
 import shutil
 import signal
 from contextlib import contextmanager
@@ -36,7 +38,11 @@ from .errors import FacesimError, InputError
 #: The files facesim writes, by suffix, with the bytes each kind starts with (at offset).
 MAGIC = {".mp4": (4, b"ftyp"), ".gif": (0, b"GIF8"), ".npz": (0, b"PK"), ".png": (0, b"\x89PNG"),
          ".obj": None, ".yaml": None, ".json": None, ".csv": None, ".parquet": (0, b"PAR1")}
-FRAME = re.compile(r"frame_\d{4,}\.png")
+#: What facesim writes into every directory it makes (a frames directory, a face
+#: directory): each file's SHA-256. ``--force`` replaces a directory only while it holds
+#: exactly those files with those contents, so a user's file that a name would pass for
+#: facesim's (``frame_0000.png``, ``head.obj``) is never taken, nor an output edited since.
+MANIFEST = "facesim-manifest.json"
 
 
 class WriteError(FacesimError):
@@ -103,15 +109,39 @@ def _exception_for(signum: int) -> BaseException:
     return KeyboardInterrupt() if signum == signal.SIGINT else Terminated(signum)
 
 
-def _is_facesim_output(path: Path, directory: bool, names: frozenset | None = None) -> bool:
-    """Whether an existing ``path`` is something facesim writes and ``--force`` may replace:
-    a directory of frames, or (``names``) of exactly those files."""
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def write_manifest(directory: Path) -> None:
+    """``MANIFEST`` in ``directory``: the SHA-256 of every file facesim wrote there."""
+    files = {p.name: _sha256(p) for p in sorted(directory.iterdir()) if p.name != MANIFEST}
+    (directory / MANIFEST).write_text(json.dumps({"written_by": "facesim", "files": files}, indent=1) + "\n")
+
+
+def _written_by_facesim(directory: Path) -> bool:
+    """Whether ``directory`` holds exactly what its manifest lists, each file unchanged."""
+    try:
+        listed = json.loads((directory / MANIFEST).read_text())["files"]
+        present = {p.name for p in directory.iterdir() if p.name != MANIFEST}
+        return (isinstance(listed, dict) and present == set(listed)
+                and all((directory / n).is_file() and not (directory / n).is_symlink()
+                        and _sha256(directory / n) == h for n, h in listed.items()))
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+
+
+def _is_facesim_output(path: Path, directory: bool) -> bool:
+    """Whether an existing ``path`` is something facesim wrote and ``--force`` may replace:
+    a directory by its manifest, a file by the bytes its kind starts with."""
     if path.is_symlink():
         return False
     if directory:
-        def ours(p):
-            return p.is_file() and (p.name in names if names is not None else FRAME.fullmatch(p.name))
-        return path.is_dir() and all(ours(p) for p in path.iterdir())
+        return path.is_dir() and _written_by_facesim(path)
     if not path.is_file():
         return False
     magic = MAGIC.get(path.suffix.lower(), (0, b""))
@@ -123,24 +153,28 @@ def _is_facesim_output(path: Path, directory: bool, names: frozenset | None = No
     return head[offset:] == start
 
 
-def check_destination(path: Path, force: bool, directory: bool = False, names: frozenset | None = None) -> None:
-    """Raise InputError unless ``path`` may be written (step 1 of the module's rule); a
-    directory facesim writes holds frames, or exactly the files ``names``."""
+def check_destination(path: Path, force: bool, directory: bool = False) -> None:
+    """Raise InputError unless ``path`` may be written (step 1 of the module's rule)."""
     resolved = path.resolve()
     cwd = Path.cwd().resolve()
     if resolved == cwd or resolved in cwd.parents:
         raise InputError(f"{path}: is the working directory or one of its parents; name a new output")
-    if not (path.exists() or path.is_symlink()):
+    if not (path.exists() or path.is_symlink()) or (directory and _empty_directory(path)):
         _check_parent(path)
         return
     if not force:
         raise InputError(f"{path}: already exists (use --force to overwrite)")
-    if not _is_facesim_output(path, directory, names):
-        what = (f"a directory of {', '.join(sorted(names))}" if names else "a directory of frame_NNNN.png files") \
-            if directory else f"a {path.suffix or 'file'} file facesim wrote"
+    if not _is_facesim_output(path, directory):
+        what = f"a directory facesim wrote, unchanged since (its {MANIFEST} says)" if directory \
+            else f"a {path.suffix or 'file'} file facesim wrote"
         raise InputError(f"{path}: exists and is not {what}; --force replaces only facesim's own outputs, "
                          "so move or remove it yourself")
     _check_parent(path)
+
+
+def _empty_directory(path: Path) -> bool:
+    """An existing directory with nothing in it: a frames output may go there."""
+    return path.is_dir() and not path.is_symlink() and not any(path.iterdir())
 
 
 def _check_parent(path: Path) -> None:
@@ -181,6 +215,8 @@ def atomic_path(path: str | Path, directory: bool = False, replace: bool = True,
             tmp.mkdir()
         yield tmp
         check_terminated()
+        if directory:
+            write_manifest(tmp)
         if verify is not None:
             try:
                 verify(tmp)
@@ -226,6 +262,7 @@ def _make_parents(path: Path) -> list[Path]:
 
 def _move_into_place(tmp: Path, path: Path, directory: bool, replace: bool) -> None:
     exists = path.exists() or path.is_symlink()
+    replace = replace or (directory and _empty_directory(path))
     if exists and not replace:
         raise InputError(f"{path}: appeared while facesim was writing it (another run?); use --force to overwrite")
     if directory:

@@ -3,6 +3,8 @@ photo baked into the head's texture, the face directory (facesim.face.fit, faces
 facesim.face.own_face)."""
 
 import importlib.util
+import subprocess
+import sys
 
 import imageio.v3 as iio
 import numpy as np
@@ -98,7 +100,7 @@ def test_face_directory(tmp_path, photos):
 
     out = tmp_path / "hopper"
     record = face_from_photo(photos["hopper"], out)
-    assert {p.name for p in out.iterdir()} == FACE_FILES
+    assert {p.name for p in out.iterdir()} == FACE_FILES | {"facesim-manifest.json"}
     saved = yaml.safe_load((out / "face.yaml").read_text())
     assert saved["identity"] == record["identity"] and len(saved["identity"]) == 100
     camera = Camera.from_dict(saved["camera"], "face.yaml")
@@ -338,7 +340,7 @@ def test_face_options_and_their_errors(faces, photos, tmp_path):
     spec_file.write_text("frames: 3\naus: {AU12: 1.0}\nface: me\n")
     done = runner.invoke(app, ["render", str(spec_file), "--onto", str(photos["astronaut"]), "-o", str(out)])
     assert done.exit_code == 0, done.output
-    assert sorted(p.name for p in out.iterdir()) == [f"frame_{k:04d}.png" for k in range(3)]
+    assert sorted(p.name for p in out.glob("frame_*.png")) == [f"frame_{k:04d}.png" for k in range(3)]
     assert iio.imread(out / "frame_0000.png").shape == read_image(photos["astronaut"]).shape
 
     wide = tmp_path / "wide.png"
@@ -362,3 +364,105 @@ def test_face_options_and_their_errors(faces, photos, tmp_path):
         result = runner.invoke(app, args + ["-o", str(target)])
         assert result.exit_code == 2 and message in result.output, (args, result.output)
         assert "Traceback" not in result.output and not target.exists()
+
+
+@pytest.mark.parametrize("field, value", [
+    ("translation", [float("nan"), 0.0]), ("translation", [float("inf"), 0.0]), ("translation", [1e9, 0.0]),
+    ("scale", 1e300), ("scale", 1e-300), ("scale", 1e9), ("scale", float("inf")), ("width", 0), ("width", -512),
+])
+def test_an_implausible_fitted_camera_is_one_line_before_anything_is_drawn(faces, photos, tmp_path, field, value):
+    """A face.yaml camera with a translation of NaN or inf, or a scale of 1e300, 1e-300 or
+    1e9, rendered "wrote 3 frames" of the photo untouched, no head; a scale of inf was a
+    traceback after the simulation had started, a width of 0 a ZeroDivisionError, and a
+    width of -512 passed the check and failed later."""
+    import shutil
+
+    import yaml
+
+    face = tmp_path / "me"
+    shutil.copytree(faces["astronaut"], face)
+    record = yaml.safe_load((face / "face.yaml").read_text())
+    record["camera"][field] = value
+    (face / "face.yaml").write_text(yaml.safe_dump(record))
+    target = tmp_path / "a.gif"
+    result = subprocess.run([sys.executable, "-m", "facesim", "render", "happy", "--face", str(face), "--onto",
+                             str(photos["astronaut"]), "-o", str(target)], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
+    (line,) = result.stderr.strip().splitlines()
+    assert str(face / "face.yaml") in line and "camera" in line and field.split("_")[0] in line, line
+    assert not target.exists()
+
+
+def test_onto_photos_too_small_or_too_large(faces, photos, tmp_path):
+    """A 1x1 photo given to --onto was reported as a bad --size nobody gave; an 8000x8000
+    one took 102 s and 8 GB for three frames with no word. Now the first is refused naming
+    the photo, the second drawn at 2048 pixels on its longer side, said once."""
+    import shutil
+
+    from PIL import Image
+
+    face = tmp_path / "me"
+    shutil.copytree(faces["astronaut"], face)
+    tiny, large = tmp_path / "tiny.png", tmp_path / "large.png"
+    Image.new("RGB", (1, 1)).save(tiny)
+    Image.open(photos["astronaut"]).resize((4096, 4096)).save(large)
+    spec = tmp_path / "two.yaml"
+    spec.write_text("frames: 2\naus: {AU12: 1.0}\n")
+
+    def render(photo, target):
+        return subprocess.run([sys.executable, "-m", "facesim", "render", str(spec), "--face", str(face), "--onto",
+                               str(photo), "-o", str(target)], capture_output=True, text=True, timeout=600)
+
+    refused = render(tiny, tmp_path / "tiny_out")
+    assert refused.returncode == 2 and str(tiny) in refused.stderr and "--size" not in refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 1 and not (tmp_path / "tiny_out").exists()
+    drawn = render(large, tmp_path / "large_out")
+    assert drawn.returncode == 0, drawn.stderr
+    notices = [line for line in drawn.stderr.splitlines() if "drawn at 2048x2048" in line]
+    assert len(notices) == 1, drawn.stderr
+    assert iio.imread(tmp_path / "large_out" / "frame_0001.png").shape == (2048, 2048, 3)
+
+
+def test_a_face_yamls_numbers_are_refused_in_one_line_or_plausible(faces, tmp_path):
+    """A seeded loop of out-of-range and non-finite values in face.yaml's identity weights
+    and camera: each is refused with one line naming face.yaml, or loads as a camera and
+    an identity within the documented bounds (facesim.face.fit.PHOTO_SIDE, HEAD_SPAN;
+    facesim.face.head.IDENTITY_LIMIT)."""
+    import random
+    import shutil
+
+    import yaml
+
+    from facesim.face.fit import HEAD_SPAN, HEAD_WIDTH, PHOTO_SIDE
+    from facesim.face.head import IDENTITY_LIMIT
+    from facesim.face.own_face import load_face_directory
+
+    rng = random.Random(44)
+    bad = [float("nan"), float("inf"), -float("inf"), 1e300, -1e300, 1e9, -5.0, 0.0, 1e-300, 5.0, 0.25]
+    record = yaml.safe_load((faces["astronaut"] / "face.yaml").read_text())
+    fields = [("identity", k) for k in range(100)] + [("camera", "scale"), ("camera", "kappa"), ("camera", "width"),
+                                                      ("camera", "height"), ("camera", "translation", 0),
+                                                      ("camera", "translation", 1), ("camera", "rotation", 0, 0)]
+    outcomes = set()
+    for case in range(30):
+        field, value = rng.choice(fields), rng.choice(bad)
+        face = tmp_path / f"face{case}"
+        shutil.copytree(faces["astronaut"], face)
+        changed = yaml.safe_load(yaml.safe_dump(record))
+        node = changed
+        for key in field[:-1]:
+            node = node[key]
+        node[field[-1]] = value
+        (face / "face.yaml").write_text(yaml.safe_dump(changed))
+        try:
+            loaded = load_face_directory(face)
+        except InputError as error:
+            assert "\n" not in str(error) and str(face / "face.yaml") in str(error), (field, value, error)
+            outcomes.add("refused")
+            continue
+        camera = loaded.camera
+        assert np.isfinite(loaded.identity).all() and np.abs(loaded.identity).max() <= IDENTITY_LIMIT, (field, value)
+        assert PHOTO_SIDE[0] <= min(camera.width, camera.height) and max(camera.width, camera.height) <= PHOTO_SIDE[1]
+        assert HEAD_SPAN[0] <= camera.scale * HEAD_WIDTH / camera.width <= HEAD_SPAN[1] and np.isfinite(camera.translation).all()
+        outcomes.add("loaded")
+    assert outcomes == {"refused", "loaded"}

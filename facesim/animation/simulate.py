@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config import PARALLEL_FROM
+from ..errors import SimulationError
 from ..face.figure import figure_for
 from ..face.loading import load_face_model
 from ..physics.model import Model
@@ -30,8 +31,16 @@ from .spec import Spec, activation_table, pose_table
 
 #: A run expected to take longer than this (s) is announced before it starts.
 LONG_RUN = 120.0
-#: Vertex-steps per second assumed for that estimate (BENCHMARKS.md: 2-4 million).
-STEP_RATE = 2e6
+#: A clip this long or longer is timed on its first ``MEASURED_FRAMES`` frames, on the face
+#: at hand, before it starts (``expected_seconds``). A rate assumed for every face (2
+#: million vertex-steps a second) predicted 23 s for 100,000 frames of the head, whose
+#: implicit steps then took 156 s.
+LONG_CLIP, MEASURED_FRAMES = 2000, 32
+#: A run in which muscles are activated but no vertex moves further than this (cm) from
+#: rest has failed, whatever its numbers say: a muscle of 1e150 once overflowed into a
+#: face that moved 0.0 cm in every frame, and the video was written. The weakest
+#: activation of the library moves the face by tenths of a millimetre.
+STILL = 1e-4
 
 
 @dataclass(frozen=True)
@@ -110,6 +119,12 @@ class Animation:
         return len(self.positions)
 
     @property
+    def apex_frame(self) -> int:
+        """The last frame at which the total activation is largest."""
+        total = self.activations.sum(axis=1)
+        return int(len(total) - 1 - np.argmax(total[::-1]))
+
+    @property
     def active_muscles(self) -> tuple[str, ...]:
         return tuple(n for n, a in zip(self.muscle_names, self.activations.max(axis=0)) if a > 0)
 
@@ -121,6 +136,28 @@ def _identity_key(identity):
 def model_for(spec: Spec) -> Model:
     """The (cached) model of a spec's mesh, muscles, material and identity."""
     return load_face_model(spec.mesh_path.resolve(), spec.muscles_path.resolve(), spec.material, _identity_key(spec.head_identity))
+
+
+def expected_seconds(model: Model, table: np.ndarray, dt: float) -> float:
+    """How long simulating ``table`` should take here: its first ``MEASURED_FRAMES``
+    frames run (once before, so that no compiling is timed) and their time scaled."""
+    sample = table[:MEASURED_FRAMES]
+    run(model, sample[:1], dt, stop_on_inversion=False)
+    start = time.perf_counter()
+    run(model, sample, dt, stop_on_inversion=False)
+    return (time.perf_counter() - start) * len(table) / len(sample)
+
+
+def check_moved(model: Model, table: np.ndarray, positions: np.ndarray, source: str) -> None:
+    """SimulationError when muscles are activated in ``table`` and yet no vertex of
+    ``positions`` (frames, n, 3) moved further than ``STILL`` from rest."""
+    active = np.flatnonzero(table[:, :model.muscles.count].max(axis=0) > 0) if len(table) else []
+    if len(active):
+        moved = max((float(np.abs(p - model.rest_position).max()) for p in positions), default=0.0)
+        if not moved > STILL:
+            names = ", ".join(model.muscles.names[m] for m in active[:3]) + (" ..." if len(active) > 3 else "")
+            raise SimulationError(f"{source}: the face did not move (at most {moved:.2g} cm) although {names} "
+                                  "contract: a failed simulation, nothing written", len(table) - 1)
 
 
 def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background: bool = False,
@@ -143,15 +180,22 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
     head's 468 vertices: 1,035 -> 988 ms and 1,048 -> 1,013."""
     model = model_for(spec)
     table = activation_table(spec, model.muscles)
-    expected = len(table) * model.material.substeps * model.vertex_count / STEP_RATE
-    if notice and expected > LONG_RUN:
-        notice(f"{spec.source}: {len(table)} frames x {model.material.substeps} sub-steps x {model.vertex_count:,} "
-               f"vertices: about {expected / 60:.0f} minutes of simulation (Ctrl-C stops it)")
+    if notice and len(table) >= LONG_CLIP:
+        expected = expected_seconds(model, table, spec.dt)
+        if expected > LONG_RUN:
+            notice(f"{spec.source}: {len(table):,} frames of {model.vertex_count:,} vertices: about "
+                   f"{expected / 60:.0f} minutes of simulation, as its first frames ran here (Ctrl-C stops it)")
     out = diagnostics(len(table), model.vertex_count)
-    progress = Progress() if background and not with_muscle_forces and concurrent_kernels() and model.vertex_count < PARALLEL_FROM else None
+    progress = Progress(held=len(table) - 1) if (background and not with_muscle_forces and concurrent_kernels()
+                                                 and model.vertex_count < PARALLEL_FROM) else None
 
     def simulated():
         run(model, table, spec.dt, stop_on_inversion, spec.source, out=out, progress=progress)
+        if progress and progress.cancelled:
+            return  # a failed render stopped it: neither checked nor reported whole
+        check_moved(model, table, out.positions, spec.source)
+        if progress:
+            progress.release(len(table))
 
     def in_background():
         try:

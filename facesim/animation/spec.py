@@ -25,6 +25,7 @@ the muscle file and turns the spec into a (frames, muscles) table once, before s
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 from typing import Annotated, Literal
@@ -34,6 +35,7 @@ from pydantic import Field, PrivateAttr, ValidationError, field_validator, model
 
 from ..config import DEFAULT_MESH, LIBRARY, default_muscles
 from ..errors import InputError
+from ..face.head import IDENTITY_MODES, identity_problem
 from ..face.material import MaterialSpec
 from ..physics.muscles import MuscleSet
 from ..schema import Strict, load_model
@@ -173,6 +175,20 @@ class Spec(Strict):
     face: Path | None = Field(None, description="a face directory written by `facesim face from-photo`")
     _source: Path | None = PrivateAttr(None)
 
+    @field_validator("identity", mode="before")
+    @classmethod
+    def _person(cls, identity):
+        if isinstance(identity, list):
+            if len(identity) > IDENTITY_MODES:
+                raise ValueError(f"expected a seed or at most {IDENTITY_MODES} weights, got {len(identity)}")
+            for k, w in enumerate(identity):
+                if isinstance(w, bool) or not isinstance(w, (int, float)) or not math.isfinite(w):
+                    raise ValueError(f"weight {k} is {w!r}: expected a seed or a list of finite numbers")
+            problem = identity_problem(np.asarray(identity, dtype=np.float64))
+            if problem:
+                raise ValueError(problem)
+        return identity
+
     @field_validator("aus")
     @classmethod
     def _facs(cls, aus):
@@ -245,6 +261,9 @@ class Spec(Strict):
         """A copy with fields replaced (used by the CLI's --mesh, --muscles, --identity,
         --face). A path given here is relative to the working directory, not to the spec;
         a face given here replaces the spec's identity and mesh, an identity or mesh its face."""
+        if changes.get("face") is not None and (changes.get("identity") is not None or changes.get("mesh") is not None):
+            given = "--identity" if changes.get("identity") is not None else "--mesh"
+            raise InputError(f"--face: not with {given}: a face directory brings its own head, identity and muscles")
         for key in ("mesh", "muscles", "face"):
             if changes.get(key) is not None:
                 changes[key] = Path(changes[key]).resolve()

@@ -1,13 +1,16 @@
 """From an animation to files: render its frames (in one process or several) and write
 them as MP4, GIF, a PNG sequence, or raw NPZ positions.
 
-The output kind follows the path: ``.mp4``, ``.gif``, ``.npz``, anything else a directory
-of ``frame_0000.png`` ... Every output is written under a temporary name and renamed into
+The output kind follows the path as the user means it: ``.mp4``, ``.gif``, ``.npz``,
+``.png`` (one frame, the apex unless another is asked for), and a directory of
+``frame_0000.png`` ... for a path that ends in a slash, is a directory already, or has no
+suffix. Every output is written under a temporary name and renamed into
 place when complete (``writers.atomic_path``).
 """
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from contextlib import nullcontext
@@ -29,16 +32,23 @@ KINDS = {".mp4": "mp4", ".gif": "gif", ".npz": "npz"}
 ARROW_SCALE = 0.004
 
 
-def output_kind(path: Path) -> str:
-    return KINDS.get(path.suffix.lower(), "png" if path.suffix == "" else "unknown")
+def output_kind(path: str | Path) -> str:
+    """mp4, gif, npz, image (one PNG), png (a directory of frames) or unknown."""
+    text = os.fspath(path)
+    suffix = Path(text).suffix.lower()
+    if text.endswith(("/", os.sep)) or Path(text).is_dir() or suffix == "":
+        return "png"
+    return "image" if suffix == ".png" else KINDS.get(suffix, "unknown")
 
 
-def check_output(path: Path, force: bool, settings: RenderSettings | None = None) -> str:
+def check_output(path: str | Path, force: bool, settings: RenderSettings | None = None) -> str:
     """Validate an output path before any work: its kind, and that it may be written
     (facesim.files.check_destination: --force replaces only facesim's own outputs)."""
     kind = output_kind(path)
+    path = Path(path)
     if kind == "unknown":
-        raise InputError(f"{path}: unknown output type {path.suffix!r} (use .mp4, .gif, .npz or a directory)")
+        raise InputError(f"{path}: unknown output type {path.suffix!r} (use .mp4, .gif, .npz, .png, or a directory "
+                         "written DIR/)")
     if kind == "mp4" and settings is not None and (settings.width % 2 or settings.height % 2):
         raise InputError(f"--size: MP4 needs an even width and height, got {settings.width}x{settings.height}")
     check_destination(path, force, directory=kind == "png")
@@ -77,7 +87,7 @@ def _verify_frames(kind: str, count: int, fps: float):
                 from PIL import Image
 
                 found = 0
-                for png in sorted(tmp.iterdir()):
+                for png in sorted(tmp.glob("frame_*.png")):
                     with Image.open(png) as image:
                         image.verify()
                     found += 1
@@ -190,6 +200,23 @@ def write_frames(frames, path: Path, kind: str, fps: float, replace: bool = True
                 first.save(stream, format="GIF", save_all=True, append_images=rest, duration=1000.0 / fps, loop=0)
 
 
+def write_image(image: np.ndarray, path: Path, replace: bool = True) -> None:
+    """One frame as a PNG, atomically, read back before it is renamed into place."""
+    import imageio.v3 as iio
+
+    def verify(tmp: Path) -> None:
+        from PIL import Image
+
+        try:
+            with Image.open(tmp) as written:
+                written.verify()
+        except Exception as exc:  # a truncated file fails in many ways
+            raise WriteError(f"the written PNG does not read back ({type(exc).__name__}){why_short(tmp)}") from None
+
+    with atomic_path(path, replace=replace, verify=verify) as tmp:
+        iio.imwrite(tmp, image)
+
+
 def _verify_npz(frames: int):
     def verify(tmp: Path) -> None:
         try:
@@ -229,15 +256,29 @@ class RenderReport:
         return self.frames / max(self.simulation_seconds + self.render_seconds, 1e-9)
 
 
-def write_animation(animation: Animation, path: Path, settings: RenderSettings, fps: float | None = None,
+def write_animation(animation: Animation, path: str | Path, settings: RenderSettings, fps: float | None = None,
                     backend: str = "auto", jobs: int = 1, progress=None,
-                    renderer: FaceRenderer | None = None, replace: bool = False) -> RenderReport:
+                    renderer: FaceRenderer | None = None, replace: bool = False, frame: int | None = None) -> RenderReport:
     """Render (unless NPZ) and write one animation; the output path was checked before
-    (``replace``: it was allowed to exist, with --force)."""
+    (``replace``: it was allowed to exist, with --force). A ``.png`` is one frame:
+    ``frame``, by default the apex."""
     kind = output_kind(path)
+    path = Path(path)
     start = time.perf_counter()
     if kind == "npz":
         write_npz(animation.ready(), path, replace)
+    elif kind == "image":
+        k = animation.apex_frame if frame is None else frame
+        own = renderer is None
+        renderer = renderer or FaceRenderer.of(animation, settings, backend)
+        try:
+            image = renderer.frame(animation.ready(k), k, arrows_for(animation)[k] if settings.show_muscles else None)
+        finally:
+            if own:
+                renderer.close()
+        write_image(image, path, replace)
+        return RenderReport(animation.name, path, len(animation.active_muscles), 1, animation.simulation_seconds,
+                            time.perf_counter() - start)
     else:
         frames = iter_frames(animation, settings, backend, jobs, progress, renderer)
         write_frames(frames, path, kind, fps or animation.fps, replace, count=animation.frames)

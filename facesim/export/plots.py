@@ -31,7 +31,7 @@ def _front_view(model, backend: str) -> tuple[np.ndarray | None, np.ndarray]:
 def plot_muscles(model, regions: list[np.ndarray], path: Path, backend: str = "auto") -> None:
     """The face from the front (a head rendered, a mask as its mesh), every muscle an
     arrow from insertion to attachment, its region of influence (``regions``, the mesh's
-    vertices of each: facesim.physics.run.muscle_regions) shaded."""
+    vertices of each: facesim.physics.model.muscle_regions) shaded."""
     import matplotlib
 
     matplotlib.use("Agg")

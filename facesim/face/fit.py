@@ -54,6 +54,16 @@ MIN_FACE_SIZE = 100
 MAX_YAW = 35.0
 
 
+#: A fitted camera facesim takes from a face directory: a photo of 16 to 65,536 pixels a
+#: side; the head's origin at most a photo's width or height from its centre; and a scale
+#: (pixels per cm) at which a head ``HEAD_WIDTH`` cm wide spans ``HEAD_SPAN`` of the
+#: photo's width, from a fiftieth (a face of ten-odd pixels, below what the fit accepts)
+#: to five photos. Outside them a camera draws no head onto the photo (a translation of
+#: inf, a scale of 1e300 or 1e-300: every frame was the photo untouched) or breaks the
+#: composite (a width of 0).
+PHOTO_SIDE, HEAD_WIDTH, HEAD_SPAN = (16, 65536), 15.0, (0.02, 5.0)
+
+
 @dataclass(frozen=True)
 class Camera:
     """The fitted pinhole (module docstring): ``rotation`` R (3, 3) turns the head's frame
@@ -113,8 +123,20 @@ class Camera:
         r = camera.rotation
         if r.shape != (3, 3) or camera.translation.shape != (2,) or not camera.scale > 0 or not 0 <= camera.kappa < 1:
             raise InputError(f"{where}: expected a 3x3 rotation, a 2-vector translation, a positive scale and 0 <= kappa < 1")
-        if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+        if not np.isfinite(r).all() or not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
             raise InputError(f"{where}: the rotation is not a rotation")
+        low, high = PHOTO_SIDE
+        if not (low <= camera.width <= high and low <= camera.height <= high):
+            raise InputError(f"{where}: width and height: expected the photo's size, {low} to {high} pixels, "
+                             f"got {camera.width}x{camera.height}")
+        if not (np.isfinite(camera.translation).all() and abs(camera.translation[0]) <= camera.width
+                and abs(camera.translation[1]) <= camera.height):
+            raise InputError(f"{where}: translation: expected the head within the photo, at most {camera.width}x"
+                             f"{camera.height} pixels from its centre, got {camera.translation.tolist()}")
+        span = camera.scale * HEAD_WIDTH / camera.width
+        if not HEAD_SPAN[0] <= span <= HEAD_SPAN[1]:
+            raise InputError(f"{where}: scale: {camera.scale:g} pixels per cm draws the head {span:.3g} photo widths "
+                             f"wide; expected {HEAD_SPAN[0]:g} to {HEAD_SPAN[1]:g}")
         return camera
 
 

@@ -33,6 +33,42 @@ from ..physics.mesh import FaceMesh
 
 #: How many identity modes the head has (all of ICT's).
 IDENTITY_MODES = 100
+#: How far explicit identity weights may go, in standard deviations of ICT's modes (ICT
+#: draws each weight from the standard normal distribution). Beyond ``IDENTITY_LIMIT`` on
+#: any mode, or ``IDENTITY_NORM_LIMIT`` for the weights' length (a hundred standard
+#: normal draws have length 10.0 +- 0.7: 15 is seven of its deviations out), the head is
+#: no person's: weights of 5 on every mode tore and crossed its surface, and of 10 or more
+#: its mirror map broke. Beyond ``IDENTITY_NOTICE`` on any mode a run says so, once:
+#: one draw in 2,000 goes that far, and the head is then unusual, not broken. A seed's
+#: weights are ICT's own sampling and are not bounded.
+IDENTITY_LIMIT, IDENTITY_NORM_LIMIT, IDENTITY_NOTICE = 4.5, 15.0, 3.5
+
+
+def identity_problem(weights: np.ndarray) -> str | None:
+    """Why explicit identity weights (k,) are no plausible person, or None."""
+    weights = np.asarray(weights, dtype=np.float64)
+    if not np.isfinite(weights).all():
+        return f"weight {int(np.flatnonzero(~np.isfinite(weights))[0])} is not a finite number"
+    worst = int(np.argmax(np.abs(weights))) if len(weights) else 0
+    if len(weights) and abs(weights[worst]) > IDENTITY_LIMIT:
+        return (f"weight {worst} is {weights[worst]:g}, beyond {IDENTITY_LIMIT:g} standard deviations of ICT's mode "
+                "(each is drawn from the standard normal)")
+    if np.linalg.norm(weights) > IDENTITY_NORM_LIMIT:
+        return (f"the weights' length is {np.linalg.norm(weights):.3g}, beyond {IDENTITY_NORM_LIMIT:g} (a person's is "
+                "about 10: a hundred standard normal draws)")
+    return None
+
+
+def identity_notice(identity) -> str | None:
+    """A line for explicit weights past ``IDENTITY_NOTICE`` on some mode, or None."""
+    if identity is None or isinstance(identity, (int, np.integer)):
+        return None
+    weights = np.asarray(identity, dtype=np.float64)
+    far = np.flatnonzero(np.abs(weights) > IDENTITY_NOTICE)
+    if len(far):
+        return (f"identity: {len(far)} weights beyond {IDENTITY_NOTICE:g} standard deviations (weight {far[0]} is "
+                f"{weights[far[0]]:g}): an unusual head")
+    return None
 
 
 @dataclass(frozen=True)
@@ -139,6 +175,9 @@ def identity_weights(identity: int | list[float] | None) -> np.ndarray:
     values = np.asarray(identity, dtype=np.float64)
     if values.ndim != 1 or len(values) > IDENTITY_MODES or not np.isfinite(values).all():
         raise InputError(f"identity: expected a seed or at most {IDENTITY_MODES} finite weights, got {len(values)} values")
+    problem = identity_problem(values)
+    if problem:
+        raise InputError(f"identity: {problem}")
     weights[: len(values)] = values
     return weights
 

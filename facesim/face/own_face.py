@@ -81,7 +81,7 @@ def _load_face_directory(path: Path, stamp: tuple) -> FaceDirectory:
 
     from .figure import COLUMNS, TILE, TILES
     from .fit import Camera
-    from .head import IDENTITY_MODES
+    from .head import IDENTITY_MODES, identity_problem
 
     missing = sorted(name for name in FACE_FILES if not (path / name).is_file())
     if missing:
@@ -100,6 +100,9 @@ def _load_face_directory(path: Path, stamp: tuple) -> FaceDirectory:
         weights = np.zeros(0)
     if weights.shape != (IDENTITY_MODES,) or not np.isfinite(weights).all():
         raise InputError(f"{record_path}: identity: expected {IDENTITY_MODES} finite weights")
+    problem = identity_problem(weights)
+    if problem:
+        raise InputError(f"{record_path}: identity: {problem}")
     if not isinstance(record.get("camera"), dict):
         raise InputError(f"{record_path}: camera: expected the fitted camera (a mapping)")
     camera = Camera.from_dict(record["camera"], f"{record_path}: camera")
@@ -117,14 +120,31 @@ def _load_face_directory(path: Path, stamp: tuple) -> FaceDirectory:
     return FaceDirectory(path, tuple(float(w) for w in weights), camera)
 
 
+#: The longest side (pixels) of an --onto render's frames: a larger photo is downscaled
+#: to it for the composite. An 8000x8000 photo drawn at its own size took 102 s and 8 GB
+#: for three frames.
+ONTO_LIMIT = 2048
+
+
 def onto_photo(face: FaceDirectory, photo: str | Path, size: tuple[int, int] | None = None):
     """--onto: the photo (h, w, 3) float in [0, 255] and the face's fitted camera for it.
     The photo must be the one the face was fitted to, or that photo resized (the camera is
-    scaled with it); ``size`` (w, h), when given, must be the photo's."""
+    scaled with it), at least 16 pixels a side; one longer than ``ONTO_LIMIT`` is
+    downscaled to it (``onto_size`` says by how much). ``size`` (w, h), when given, must
+    be the size drawn at."""
+    from .fit import PHOTO_SIDE
     from .photo import read_image
 
     image = read_image(photo)
     height, width = image.shape[:2]
+    if min(width, height) < PHOTO_SIDE[0]:
+        raise InputError(f"--onto: {photo} is {width}x{height} pixels: too small to draw a face into "
+                         f"(at least {PHOTO_SIDE[0]} a side)")
+    if max(width, height) > ONTO_LIMIT:
+        from PIL import Image
+
+        width, height = onto_size(width, height)
+        image = np.asarray(Image.fromarray(image).resize((width, height), Image.Resampling.LANCZOS))
     if size is not None and tuple(size) != (width, height):
         raise InputError(f"--onto: {photo} is {width}x{height}; the frames must be the photo's size, got {size[0]}x{size[1]}")
     camera = face.camera
@@ -133,6 +153,12 @@ def onto_photo(face: FaceDirectory, photo: str | Path, size: tuple[int, int] | N
         raise InputError(f"--onto: {photo} is {width}x{height}, but {face.path.name} was fitted to a photo of "
                          f"{camera.width}x{camera.height}: give that photo (or it resized)")
     return image.astype(np.float64), camera.resized(width, height)
+
+
+def onto_size(width: int, height: int) -> tuple[int, int]:
+    """The size an --onto render of a photo of ``width`` x ``height`` draws at."""
+    factor = min(1.0, ONTO_LIMIT / max(width, height))
+    return max(1, round(width * factor)), max(1, round(height * factor))
 
 
 def _colours():

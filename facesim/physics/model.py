@@ -38,7 +38,7 @@ import numpy as np
 from ..cache import cached_arrays, key
 from ..config import CODE_DIGEST
 from ..errors import InputError
-from .layout import ModelArrays
+from .layout import ModelArrays, workspace
 from .material import Material, resolved_material
 from .mesh import FaceMesh, csr_from_pairs, inverse_permutation
 from .muscles import SPHINCTER, MuscleSet
@@ -168,12 +168,27 @@ def against_surroundings(x: np.ndarray, faces: np.ndarray, normals: np.ndarray) 
     return np.array([_against_surroundings(x, faces, t, normals) for t in range(len(faces))], dtype=bool)
 
 
+#: The strongest muscle a model takes, in centimetres of one skin spring's stretch: a
+#: muscle's peak force f (eq. 3.1) over the springs' stiffness k0 is how far it would
+#: stretch one spring alone. The calibrated head's strongest muscle is 6.4 cm of it (f =
+#: 6,389 against k0 = 1,000). Beyond 100 cm, five faces' widths, no face's muscle pulls:
+#: such forces diverged at the first frame, or, from about 1e150, overflowed into a
+#: face that moved 0.0 cm while the run reported success.
+MUSCLE_STRETCH_LIMIT = 100.0
+
+
 def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Material(), reorder: bool | None = None) -> Model:
     """The model of a face; ``material`` (for a spec's: facesim.face.material's
     ``over_muscle_file``) is per vertex of the default face and is scaled to this mesh's resolution
     (``Model.material`` is the scaled one). ``reorder``: whether the kernels take the
     mesh's vertices in a cache-friendly order (``reordered``); by default a mesh of at
-    least ``REORDER_FROM`` vertices does."""
+    least ``REORDER_FROM`` vertices does. InputError, naming the muscle file, for a
+    muscle beyond ``MUSCLE_STRETCH_LIMIT`` or one that reaches no vertex."""
+    if muscles.count and muscles.force.max() > MUSCLE_STRETCH_LIMIT * material.stiffness:
+        m = int(np.argmax(muscles.force))
+        raise InputError(f"{muscles.source}: muscle {muscles.names[m]}: force {muscles.force[m]:g} would stretch a skin "
+                         f"spring (k0 = {material.stiffness:g}) {muscles.force[m] / material.stiffness:.3g} cm, beyond "
+                         f"{MUSCLE_STRETCH_LIMIT:g}: no face's muscle pulls that hard")
     x = mesh.vertices
     faces = mesh.faces
     edges = mesh.edges
@@ -271,10 +286,31 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
     if n >= REORDER_FROM if reorder is None else reorder:
         vertex_order = cache_order(start, index)
         kernel_arrays, triangle_order = reordered(kernel_arrays, vertex_order)
-    return Model(
+    model = Model(
         **arrays, **constants, material=resolved, muscles=muscles, rig=rig, scale=mesh.scale, resolution=resolution,
         length_unit=length_unit, mesh=mesh, arrays=kernel_arrays, vertex_order=vertex_order, triangle_order=triangle_order,
     )
+    for m, region in enumerate(muscle_regions(model)):
+        if len(region) == 0:
+            raise InputError(f"{muscles.source}: muscle {muscles.names[m]}: its zone and falloff leave it no vertex of "
+                             "the mesh at rest, so it would move nothing; widen its zone or falloff")
+    return model
+
+
+def muscle_regions(model) -> list[np.ndarray]:
+    """Each muscle's region of influence at rest (the flood fill of section 3.3), as the
+    mesh's vertices."""
+    from .muscle_forces import _muscle_frame, _region_of_influence
+    from .rig_control import control
+
+    work = workspace(model.arrays)
+    rest = control(model.arrays, np.zeros(len(model.muscles.names)))
+    _muscle_frame(model.arrays, model.arrays.rest_position, work.frame)
+    regions = []
+    for m in range(model.muscle_count):
+        count = _region_of_influence(model.arrays, m, rest.origin, rest.insertion_point, work.frame, work)
+        regions.append(np.array(model.mesh_vertex(work.region[:count])))
+    return regions
 
 
 #: A mesh of at least this many vertices is simulated in a cache-friendly order of its

@@ -2,7 +2,7 @@
 (facesim.physics.solver) called in pieces, in the model's vertex order and back, with
 its diagnostics and the error of a run that blew up (:class:`SimulationError` naming the
 frame and the vertex or triangle), on this thread or frame by frame for a caller that
-waits on it (:class:`Progress`); the muscle forces on a face at given positions, and each muscle's region at rest.
+waits on it (:class:`Progress`); and the muscle forces on a face at given positions.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from ..config import PARALLEL_FROM
 from ..errors import SimulationError
 from . import layout, rig_control, solver
 from .model import Model
-from .muscle_forces import _muscle_forces, _muscle_frame, _region_of_influence
+from .muscle_forces import _muscle_forces
 
 #: Vertex-steps per call of the simulation kernel (about 0.2 s): a long run returns to
 #: Python between calls, where Ctrl-C and SIGTERM are handled.
@@ -34,10 +34,13 @@ RUNAWAY_FRACTION = 0.1
 class Progress:
     """How far a simulation running in the background has come (``simulate``): the frames
     done, the seconds spent so far, the error that stopped it; ``cancelled`` asks it to
-    stop after the frame it is on."""
+    stop after the frame it is on. With ``held``, no more than that many frames are
+    reported done until ``release``: a check of the whole run (that its face moved) may
+    still fail it before a caller has its last frame."""
 
-    def __init__(self):
+    def __init__(self, held: int | None = None):
         self._condition = threading.Condition()
+        self.held = held
         self.done = 0
         self.seconds = 0.0
         self.error: BaseException | None = None
@@ -45,7 +48,13 @@ class Progress:
 
     def advance(self, done: int, seconds: float) -> None:
         with self._condition:
-            self.done, self.seconds = done, seconds
+            self.done, self.seconds = (done if self.held is None else min(done, self.held)), seconds
+            self._condition.notify_all()
+
+    def release(self, done: int) -> None:
+        """Report ``done`` frames, past ``held``."""
+        with self._condition:
+            self.held, self.done = None, done
             self._condition.notify_all()
 
     def fail(self, error: BaseException) -> None:
@@ -60,6 +69,12 @@ class Progress:
             self._condition.wait_for(lambda: self.done > frame or self.error is not None)
             if self.done <= frame:
                 raise self.error
+
+
+def compiled_here() -> bool:
+    """Whether this process compiled the simulation's kernel rather than loading it from
+    Numba's cache (what a slow first run is put down to)."""
+    return sum(solver._simulate.stats.cache_misses.values()) > 0
 
 
 def run(
@@ -154,15 +169,3 @@ def muscle_forces(model: Model, positions: np.ndarray, activation: np.ndarray) -
     control = rig_control.control(model.arrays, activation)
     _muscle_forces(model.arrays, x, control, layout.workspace(model.arrays), forces)
     return model.in_mesh_order(forces.force)
-
-
-def muscle_regions(model) -> list[np.ndarray]:
-    """Each muscle's region of influence at rest (the flood fill of section 3.3)."""
-    work = layout.workspace(model.arrays)
-    rest = rig_control.control(model.arrays, np.zeros(len(model.muscles.names)))
-    _muscle_frame(model.arrays, model.arrays.rest_position, work.frame)
-    regions = []
-    for m in range(model.muscle_count):
-        count = _region_of_influence(model.arrays, m, rest.origin, rest.insertion_point, work.frame, work)
-        regions.append(np.array(model.mesh_vertex(work.region[:count])))
-    return regions
