@@ -168,7 +168,9 @@ def render(
         raise InputError(f"--frame: with -o x.png, a frame from 0 to {loaded.frames - 1}, got {frame}" if kind == "image"
                          else f"--frame: only with a .png output (one frame), not {output}")
     # drawn and encoded as its frames come; the muscles' arrows take every frame at once
-    animation = simulate(loaded, notice=notice, background=True, with_muscle_forces=show_muscles)
+    # a video or frames read each frame once, in order: a few frames of positions in memory
+    stream = kind in ("mp4", "gif", "png") and not show_muscles and (jobs <= 1 or loaded.frames < 2 * jobs)
+    animation = simulate(loaded, notice=notice, background=True, with_muscle_forces=show_muscles, stream=stream)
     try:
         with progress_bar(animation.frames, f"rendering {loaded.title}") as advance:
             report = write_animation(animation, output, settings, fps, backend, jobs, advance, replace=force, frame=frame)

@@ -35,13 +35,19 @@ PROJECT_DIR = PACKAGE_DIR.parent
 
 
 def _code_digest() -> str:
-    """A hash of facesim's .py files and the package's name: what its compiled kernels and
-    its cached arrays (facesim.cache) are keyed by. The package's name too: a compiled
-    kernel names the module it was compiled in, and the same code imported under another
-    name (a vendored copy) cannot load it."""
+    """A hash of the code facesim's compiled kernels are made of, and the package's name:
+    what the kernels and the implicit step's cached factors (facesim.cache) are keyed by.
+    The code: every .py file that uses Numba, and this one, whose constants the kernels
+    read as they compile; the rest (the command line, the specs, the writers) cannot
+    change a compiled kernel, and keying on it made every edit there compile everything
+    again, a minute and more. The package's name too: a compiled kernel names the module
+    it was compiled in, and the same code imported under another name (a vendored copy)
+    cannot load it."""
     digest = hashlib.sha1(__name__.rpartition(".")[0].encode() + b"\0")
     for path in sorted(PACKAGE_DIR.rglob("*.py")):
-        digest.update(path.relative_to(PACKAGE_DIR).as_posix().encode() + b"\0" + path.read_bytes())
+        code = path.read_bytes()
+        if path.name == "config.py" or b"numba" in code:
+            digest.update(path.relative_to(PACKAGE_DIR).as_posix().encode() + b"\0" + code)
     return digest.hexdigest()
 
 

@@ -15,6 +15,7 @@ import argparse
 import json
 import os
 import platform
+import re
 import statistics
 import subprocess
 import sys
@@ -308,6 +309,29 @@ def fresh_render_wall(repeats: int, size: int = 512) -> tuple[float, list[float]
              "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)")
     peak = subprocess.run([sys.executable, "-c", watch, *command], cwd=ROOT, capture_output=True, text=True, check=True)
     return median(walls), walls, int(peak.stdout) / 1024  # KB on Linux
+
+
+def long_clip_memory(short: int, long: int, size: int) -> tuple[str, dict]:
+    """Peak resident memory of `facesim render` of happy on the head to MP4, a short clip
+    and a long one, each a fresh process under a parent of its own: the long clip is
+    simulated into a ring of a few frames (simulate(stream=True)) while it is drawn."""
+    folder = Path(tempfile.mkdtemp())
+    happy = (ROOT / "expressions" / "happy.yaml").read_text()
+    watch = ("import resource, subprocess, sys, time; t = time.perf_counter(); "
+             "subprocess.run(sys.argv[1:], capture_output=True, check=True); "
+             "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, time.perf_counter() - t)")
+    figures = {}
+    for frames in (short, long):
+        spec = folder / f"happy{frames}.yaml"
+        spec.write_text(re.sub(r"(?m)^frames: .*$", f"frames: {frames}", happy))
+        command = [str(Path(sys.executable).parent / "facesim"), "render", str(spec), "-o", str(folder / f"{frames}.mp4"),
+                   "--size", f"{size}x{size}"]
+        peak, wall = subprocess.run([sys.executable, "-c", watch, *command], capture_output=True, text=True,
+                                    check=True).stdout.split()
+        figures[frames] = (int(peak) / 1024, float(wall))
+    rows = [[f"{frames:,}", f"{peak:.0f}", f"{wall:.1f}"] for frames, (peak, wall) in figures.items()]
+    rows.append(["difference", f"{figures[long][0] - figures[short][0]:+.0f}", ""])
+    return table(["frames (happy, the head, " + f"{size}², MP4)", "peak resident memory (MB)", "wall (s)"], rows), figures
 
 
 # --- scaling ---------------------------------------------------------------------------
@@ -1124,6 +1148,11 @@ def main() -> int:
     text, head_figures = head([64] if quick else [256, 512], 1 if quick else 7)
     section("The default head (ICT FaceKit), happy", text)
 
+    text, memory = long_clip_memory(30 if quick else 300, 600 if quick else 30_000, 32 if quick else 128)
+    section("Memory: a long clip streamed to MP4", text + "\n\nEach a fresh `facesim render` under a parent of its own; "
+            "`facesim render` simulates a video's frames into a ring of 8 and draws each as it comes "
+            "(facesim.animation.simulate, `stream=True`), so the positions of the whole clip are never held.")
+
     throughput = dataset_throughput(6, 64, (1,)) if quick else dataset_throughput(120, 256)  # quick: one worker of each
     section("Datasets: samples per second, local processes and Dask", throughput)
 
@@ -1145,6 +1174,8 @@ def main() -> int:
         [f"happy end to end on the head at {head_size}², antialiased, to MP4, warm", "≥ 25 fps",
          f"{head_e2e['fps']:.1f} fps ({head_e2e['fps_supersample']:.1f} fps with --supersample, "
          f"{head_e2e['fps_plain']:.1f} with --no-antialias)"],
+        ["a 30,000-frame render of the head at 128² to MP4 against a 300-frame one: peak memory", "within 100 MB",
+         ", ".join(f"{frames:,} frames {peak:.0f} MB" for frames, (peak, _) in memory.items())],
         ["`facesim render expressions/happy.yaml`, fresh process, warm caches", "≤ 3 s",
          f"{wall:.2f} s, peak memory {peak_mb:.0f} MB"],
         ["one implicit step per frame against converged small steps, held apex of the eight expressions", "≤ 2%",
@@ -1158,7 +1189,8 @@ def main() -> int:
                    fresh_peak_mb=peak_mb, scaling={str(k): v for k, v in scale.items()},
                    vertex_order={f"{label}, {'reordered' if reorder else 'as numbered'}": v for (label, reorder), v in order_figures.items()},
                    render={f"{key[0]}-{key[1]}": v for key, v in render_figures.items() if key != "processes"},
-                   head={str(k): v for k, v in head_figures.items()}, overlap=overlap_figures)
+                   head={str(k): v for k, v in head_figures.items()}, overlap=overlap_figures,
+                   memory={str(k): v for k, v in memory.items()})
     if args.json:
         args.json.write_text(json.dumps(figures))
     section("Targets", table(["target", "goal", "measured"], targets) + "\n\n" + ANALYSIS)

@@ -28,7 +28,7 @@ def test_bench_quick_prints_every_table_with_sensible_figures(tmp_path):
     assert result.returncode == 0, result.stderr[-3000:]
     for title in ("Table 3.1", "Table 3.2", "Table 3.3", "Numba against the NumPy reference", "two solvers",
                   "Compilation", "fresh process", "Scaling", "Vertex order", "Rendering", "overlapped", "default head",
-                  "Targets"):
+                  "Memory: a long clip", "Targets"):
         assert title in result.stdout
     assert "happy" in result.stdout and "disgusted anger" in result.stdout
     f = json.loads(figures_path.read_text())
@@ -54,3 +54,4 @@ def test_bench_quick_prints_every_table_with_sensible_figures(tmp_path):
         assert render["ours"] > 0 and render["floor"] > 0
     for head in f["head"].values():
         assert head["fps"] > 0 and head["fps_plain"] > 0
+    assert set(f["memory"]) == {"30", "600"} and all(50 < peak < 4000 and wall > 0 for peak, wall in f["memory"].values())

@@ -86,6 +86,14 @@ def test_a_copy_of_the_same_code_elsewhere_loads_the_compiled_kernels(tmp_path):
     assert hits_and_misses(PACKAGE_DIR.parent) == (0, 1)  # compiled, into an empty cache
     assert hits_and_misses(copy) == (1, 0)  # the copy loads it
     assert [p.name.startswith("numba-") for p in (tmp_path / "cache").iterdir()] == [True]
+    # an edit to code without kernels (the command line) keeps them; one to a kernel's
+    # file compiles again (facesim.config._code_digest)
+    with (copy / "facesim" / "cli.py").open("a") as cli:
+        cli.write("\n# an edit\n")
+    assert hits_and_misses(copy) == (1, 0)
+    with (copy / "facesim" / "physics" / "numerics.py").open("a") as kernels:
+        kernels.write("\n# an edit\n")
+    assert hits_and_misses(copy) == (0, 1)
     # the same code under another name compiles its own: a kernel names its module
     (copy / "facesim").rename(copy / "vendored")
     assert hits_and_misses(copy, "vendored") == (0, 1)

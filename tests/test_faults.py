@@ -610,13 +610,12 @@ def test_a_run_whose_activated_muscles_move_nothing_fails(tmp_path):
     spec = load_spec(write_spec(tmp_path))
     model = model_for(spec)
     table = activation_table(spec, model.muscles)
-    still = np.repeat(model.rest_position[None], len(table), axis=0)
     with pytest.raises(SimulationError, match="did not move"):
-        check_moved(model, table, still, spec.source)
-    moved = still.copy()
-    moved[-1, 0, 0] += 10 * STILL
-    check_moved(model, table, moved, spec.source)  # a face that moves passes
-    check_moved(model, np.zeros_like(table), still, spec.source)  # and one asked to stay still stays
+        check_moved(model, table, 0.0, spec.source)
+    with pytest.raises(SimulationError, match="did not move"):
+        check_moved(model, table, float("nan"), spec.source)
+    check_moved(model, table, 10 * STILL, spec.source)  # a face that moves passes
+    check_moved(model, np.zeros_like(table), 0.0, spec.source)  # and one asked to stay still stays
 
 
 @pytest.mark.parametrize("identity, message", [
@@ -719,3 +718,21 @@ def test_a_long_clip_is_announced_from_its_measured_speed(monkeypatch):
     said.clear()
     simulate(long, notice=said.append)
     assert said == []  # a shorter clip is not timed
+
+
+def test_a_clip_kept_whole_says_how_much_memory_it_takes(tmp_path):
+    """`frames: 100000` to an NPZ grew to gigabytes without a word; a video streams (its
+    memory: tests/test_simulation.py, BENCHMARKS.md). What must hold the whole clip says
+    so before it starts."""
+    spec = write_spec(tmp_path, frames=100000)
+    process = subprocess.Popen([sys.executable, "-m", "facesim", "render", str(spec), "-o", str(tmp_path / "a.npz")],
+                               stderr=subprocess.PIPE, text=True)
+    import threading
+
+    lines = []
+    threading.Thread(target=lambda: lines.extend(process.stderr), daemon=True).start()
+    wait_for(lambda: any("GB of positions" in line for line in lines), what="the memory notice")
+    process.send_signal(signal.SIGTERM)
+    process.wait(timeout=60)
+    assert any("100,000 frames of 468 vertices hold 1.0 GB of positions in memory" in line for line in lines), lines
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["spec.yaml"]

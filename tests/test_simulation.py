@@ -232,3 +232,43 @@ def test_a_mesh_simulated_on_every_core_is_simulated_before_its_frames_are_drawn
     assert facesim.simulate(spec("happy", frames=3), background=True).progress is not None
     monkeypatch.setattr(simulate_module, "PARALLEL_FROM", 0)  # the Hopper face as if it were large
     assert facesim.simulate(spec("happy", frames=3), background=True).progress is None
+
+
+def test_a_streamed_run_holds_a_few_frames_and_gives_the_same_bits(tmp_path):
+    """simulate(stream=True) keeps STREAMED_RING frames of positions, each simulated once
+    the reader has released the frame that many before it: the simulation never runs
+    further ahead of its reader than the ring (asserted on the run's own buffer and
+    count, not on memory), and the frames are the bits of a whole-clip run."""
+    from facesim.animation.simulate import STREAMED_RING
+
+    long = spec("happy", frames=400)
+    whole = facesim.simulate(long)
+    streamed = facesim.simulate(long, background=True, stream=True)
+    assert streamed.streamed and streamed.positions.shape == (STREAMED_RING, whole.positions.shape[1], 3)
+    ahead = []
+    for k in range(streamed.frames):
+        streamed.ready(k)
+        assert np.array_equal(streamed.positions_at(k), whole.positions[k]), k
+        ahead.append(streamed.progress.done - k)
+        streamed.release(k)
+    assert max(ahead) <= STREAMED_RING and ahead[0] < streamed.frames
+    assert np.array_equal(streamed.kinetic_energy, whole.kinetic_energy)
+
+
+def test_a_long_clip_is_encoded_while_its_later_frames_are_simulated(tmp_path):
+    """Rendering a streamed run to MP4: the first frames reach the encoder while most of
+    the clip is not yet simulated, and the run is never more than the ring (and the
+    renderer's frames in flight) ahead of what has been encoded."""
+    from facesim.animation.simulate import STREAMED_RING
+    from facesim.export.output import write_animation
+    from facesim.renderer.settings import RenderSettings
+
+    long = spec("happy", frames=1500)
+    streamed = facesim.simulate(long, background=True, stream=True)
+    done_when_encoded = []
+    write_animation(streamed, tmp_path / "long.mp4", RenderSettings(64, 64),
+                    progress=lambda count: done_when_encoded.append(streamed.progress.done))
+    assert len(done_when_encoded) == 1500 and (tmp_path / "long.mp4").is_file()
+    assert done_when_encoded[0] < 100  # the first frame was encoded long before the last was simulated
+    # the ring, and the renderer's frames past the one encoded: one filtered, one drawn, one prepared
+    assert max(done - k for k, done in enumerate(done_when_encoded)) <= STREAMED_RING + 3

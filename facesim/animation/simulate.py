@@ -36,6 +36,12 @@ LONG_RUN = 120.0
 #: million vertex-steps a second) predicted 23 s for 100,000 frames of the head, whose
 #: implicit steps then took 156 s.
 LONG_CLIP, MEASURED_FRAMES = 2000, 32
+#: The frames of positions a streamed run keeps (``simulate(stream=True)``): the renderer
+#: holds two in flight, and the simulation runs a few ahead of it.
+STREAMED_RING = 8
+#: A run that keeps its whole clip (an NPZ, --show-muscles, --jobs) says up front when its
+#: positions take more memory than this (bytes).
+LARGE_CLIP = 1 << 30
 #: A run in which muscles are activated but no vertex moves further than this (cm) from
 #: rest has failed, whatever its numbers say: a muscle of 1e150 once overflowed into a
 #: face that moved 0.0 cm in every frame, and the video was written. The weakest
@@ -87,7 +93,21 @@ class Animation:
     def cancel(self) -> None:
         """Stop a background simulation after the frame it is on (a failed render)."""
         if self.progress is not None:
-            self.progress.cancelled = True
+            self.progress.cancel()
+
+    def positions_at(self, frame: int) -> np.ndarray:
+        """(n, 3) the skin at ``frame`` (ready, and not yet released, when streamed)."""
+        return self.positions[frame % len(self.positions)]
+
+    def release(self, frame: int) -> None:
+        """The caller is done with frames up to ``frame``: a streamed run may reuse their room."""
+        if self.progress is not None:
+            self.progress.release(frame)
+
+    @property
+    def streamed(self) -> bool:
+        """Whether ``positions`` holds a few frames in turn rather than the whole clip."""
+        return len(self.positions) < self.frames
 
     @property
     def simulation_seconds(self) -> float:
@@ -116,7 +136,7 @@ class Animation:
 
     @property
     def frames(self) -> int:
-        return len(self.positions)
+        return len(self.activations)
 
     @property
     def apex_frame(self) -> int:
@@ -148,12 +168,11 @@ def expected_seconds(model: Model, table: np.ndarray, dt: float) -> float:
     return (time.perf_counter() - start) * len(table) / len(sample)
 
 
-def check_moved(model: Model, table: np.ndarray, positions: np.ndarray, source: str) -> None:
-    """SimulationError when muscles are activated in ``table`` and yet no vertex of
-    ``positions`` (frames, n, 3) moved further than ``STILL`` from rest."""
+def check_moved(model: Model, table: np.ndarray, moved: float, source: str) -> None:
+    """SimulationError when muscles are activated in ``table`` and yet no vertex moved
+    further than ``STILL`` from rest (``moved``, cm, the run's largest displacement)."""
     active = np.flatnonzero(table[:, :model.muscles.count].max(axis=0) > 0) if len(table) else []
     if len(active):
-        moved = max((float(np.abs(p - model.rest_position).max()) for p in positions), default=0.0)
         if not moved > STILL:
             names = ", ".join(model.muscles.names[m] for m in active[:3]) + (" ..." if len(active) > 3 else "")
             raise SimulationError(f"{source}: the face did not move (at most {moved:.2g} cm) although {names} "
@@ -161,7 +180,7 @@ def check_moved(model: Model, table: np.ndarray, positions: np.ndarray, source: 
 
 
 def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background: bool = False,
-             with_muscle_forces: bool = False) -> Animation:
+             with_muscle_forces: bool = False, stream: bool = False) -> Animation:
     """Simulate an expression spec from the neutral face. ``notice`` receives a one-line
     estimate before a run expected to take minutes. ``background``: return at once and
     simulate on a thread of its own (module docstring), where Numba allows it
@@ -169,7 +188,11 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
     ``PARALLEL_FROM`` vertices); the spec, mesh and muscles are checked before it starts
     either way. ``with_muscle_forces``: the muscles' forces on every frame too
     (``Animation.muscle_force``, what ``--show-muscles`` draws), after a simulation on
-    this thread.
+    this thread. ``stream`` (with ``background``): keep ``STREAMED_RING`` frames of
+    positions, each simulated once the caller has released the frame that many before
+    it (``Animation.positions_at``, ``release``): a clip of any length in the same
+    memory, for a caller that reads its frames once, in order (a video's writer). A
+    simulation that cannot run in the background keeps the whole clip.
 
     A larger mesh is simulated first: its simulation wants every core, and the renderer
     (llvmpipe's rasteriser threads, the frames' preparation, the encoder) already keeps
@@ -185,17 +208,26 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
         if expected > LONG_RUN:
             notice(f"{spec.source}: {len(table):,} frames of {model.vertex_count:,} vertices: about "
                    f"{expected / 60:.0f} minutes of simulation, as its first frames ran here (Ctrl-C stops it)")
-    out = diagnostics(len(table), model.vertex_count)
-    progress = Progress(held=len(table) - 1) if (background and not with_muscle_forces and concurrent_kernels()
-                                                 and model.vertex_count < PARALLEL_FROM) else None
+    behind = background and not with_muscle_forces and concurrent_kernels() and model.vertex_count < PARALLEL_FROM
+    capacity = STREAMED_RING if behind and stream and len(table) > STREAMED_RING else None
+    held = len(table) * model.vertex_count * 3 * 8
+    if notice and capacity is None and held > LARGE_CLIP:
+        notice(f"{spec.source}: {len(table):,} frames of {model.vertex_count:,} vertices hold {held / 2**30:.1f} GB of "
+               "positions in memory (a video, drawn as it is simulated, holds a few frames)")
+    out = diagnostics(len(table), model.vertex_count, capacity)
+    progress = Progress(held=len(table) - 1, capacity=capacity) if behind else None
+    largest = [0.0]
+
+    def moved(start, block):
+        largest[0] = max(largest[0], float(np.abs(block - model.rest_position).max(initial=0.0)))
 
     def simulated():
-        run(model, table, spec.dt, stop_on_inversion, spec.source, out=out, progress=progress)
+        run(model, table, spec.dt, stop_on_inversion, spec.source, out=out, progress=progress, on_frames=moved)
         if progress and progress.cancelled:
             return  # a failed render stopped it: neither checked nor reported whole
-        check_moved(model, table, out.positions, spec.source)
+        check_moved(model, table, largest[0], spec.source)
         if progress:
-            progress.release(len(table))
+            progress.complete(len(table))
 
     def in_background():
         try:

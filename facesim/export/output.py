@@ -149,6 +149,8 @@ def iter_frames(animation: Animation, settings: RenderSettings, backend: str = "
         return
     bounds = np.linspace(0, frames, jobs * 2 + 1).astype(int)
     pose = animation.pose
+    if animation.streamed:
+        raise ValueError("a streamed animation is drawn in order in one process")
     chunks = [(animation.positions[a:b], None if arrows is None else arrows[a:b], None if pose is None else pose[a:b],
                animation.jaw[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
     fixed = [(animation.rest, animation.faces, settings, backend, animation.figure, animation.face)] * len(chunks)
@@ -231,6 +233,8 @@ def _verify_npz(frames: int):
 
 
 def write_npz(animation: Animation, path: Path, replace: bool = True) -> None:
+    if animation.streamed:
+        raise ValueError("an NPZ holds every frame's positions: simulate without stream")
     with atomic_path(path, replace=replace, verify=_verify_npz(animation.frames)) as tmp:
         np.savez_compressed(
             tmp, positions=animation.positions, faces=animation.faces, rest=animation.rest,

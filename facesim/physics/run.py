@@ -35,12 +35,16 @@ class Progress:
     """How far a simulation running in the background has come (``simulate``): the frames
     done, the seconds spent so far, the error that stopped it; ``cancelled`` asks it to
     stop after the frame it is on. With ``held``, no more than that many frames are
-    reported done until ``release``: a check of the whole run (that its face moved) may
-    still fail it before a caller has its last frame."""
+    reported done until ``complete``: a check of the whole run (that its face moved) may
+    still fail it before a caller has its last frame. With ``capacity``, the run's
+    positions are a ring of that many frames (a streamed run): a frame is simulated only
+    once the caller has ``release``d the frame ``capacity`` before it."""
 
-    def __init__(self, held: int | None = None):
+    def __init__(self, held: int | None = None, capacity: int | None = None):
         self._condition = threading.Condition()
         self.held = held
+        self.capacity = capacity
+        self.released = 0
         self.done = 0
         self.seconds = 0.0
         self.error: BaseException | None = None
@@ -51,10 +55,27 @@ class Progress:
             self.done, self.seconds = (done if self.held is None else min(done, self.held)), seconds
             self._condition.notify_all()
 
-    def release(self, done: int) -> None:
+    def complete(self, done: int) -> None:
         """Report ``done`` frames, past ``held``."""
         with self._condition:
             self.held, self.done = None, done
+            self._condition.notify_all()
+
+    def release(self, frame: int) -> None:
+        """The caller is done with frames up to ``frame``: their slots may be reused."""
+        with self._condition:
+            self.released = max(self.released, frame + 1)
+            self._condition.notify_all()
+
+    def wait_for_room(self, stop: int) -> None:
+        """Return once frames up to ``stop`` (exclusive) fit in the ring, or when cancelled."""
+        if self.capacity is not None:
+            with self._condition:
+                self._condition.wait_for(lambda: stop - self.released <= self.capacity or self.cancelled)
+
+    def cancel(self) -> None:
+        with self._condition:
+            self.cancelled = True
             self._condition.notify_all()
 
     def fail(self, error: BaseException) -> None:
@@ -86,27 +107,34 @@ def run(
     threads: int | None = None,
     out: solver.Diagnostics | None = None,
     progress: Progress | None = None,
+    on_frames=None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Simulate ``activations`` (frames, M) from rest. Returns positions, kinetic energy,
     inverted-triangle counts and smallest relative areas per frame: ``out``'s arrays if
     given (``diagnostics``). The kernels' parallel loops run on ``threads`` threads: by
     default every core Numba has for a mesh of at least ``PARALLEL_FROM`` vertices, else
     one (facesim.config). With ``progress``, ``STREAMED_FRAMES`` frames a call, each
-    reported done as soon as it is in ``out``, and the run stops early when cancelled."""
+    reported done as soon as it is in ``out``, and the run stops early when cancelled;
+    ``out.positions`` may then hold fewer frames than the run, a ring reused in turn as
+    the caller releases frames (``Progress``). ``on_frames(start, positions)`` sees each
+    piece's positions (k, n, 3), in the mesh's order, as they are written."""
     frames = len(activations)
     if activations.ndim != 2 or activations.shape[1] != len(model.muscles.names):
         raise ValueError(f"activations must be (frames, {len(model.muscles.names)}), one column per muscle and control")
     n = model.vertex_count
     state = layout.State(np.array(model.arrays.rest_position), np.zeros((n, 3)))  # the kernels' vertex order (Model)
     out = diagnostics(frames, n) if out is None else out
-    kernel_out = out if model.vertex_order is None else out._replace(positions=np.empty_like(out.positions))
+    ring = len(out.positions) < frames  # a streamed run: a few frames' room, reused in turn
+    if ring and (progress is None or progress.capacity != len(out.positions)):
+        raise ValueError("positions for fewer frames than the run need a Progress of that capacity")
     frame_speed = RUNAWAY_FRACTION * model.scale / dt
     energy_limit = 0.5 * model.material.mass * n * frame_speed**2
     table = np.ascontiguousarray(activations, dtype=np.float64)
     control = rig_control.control(model.arrays, np.zeros(table.shape[1]))
     work, forces = layout.workspace(model.arrays), layout.forces(model.arrays)
     factor = model.preconditioner(float(dt) / model.material.substeps)
-    piece = STREAMED_FRAMES if progress else max(1, int(STEPS_PER_CALL / (model.material.substeps * n)))
+    piece = 1 if ring else STREAMED_FRAMES if progress else max(1, int(STEPS_PER_CALL / (model.material.substeps * n)))
+    scratch = None if model.vertex_order is None else np.empty((min(piece, frames), n, 3))  # the kernels' order
     status, frame, element = layout.OK, -1, -1
     started = time.perf_counter()
     if threads is None:
@@ -116,13 +144,22 @@ def run(
     try:
         for start in range(0, frames, piece):  # Python between pieces: Ctrl-C and SIGTERM act within about 0.2 s
             stop = min(frames, start + piece)
+            if progress:
+                progress.wait_for_room(stop)
+                if progress.cancelled:
+                    break
+            first = start % len(out.positions) if ring else start
+            rows = out.positions[first:first + stop - start]
             status, frame, element = solver._simulate(
-                model.arrays, table, start, stop, float(dt), int(model.material.substeps),
-                energy_limit, stop_on_inversion, state, control, work, forces, factor, kernel_out,
+                model.arrays, table, start, stop, float(dt), int(model.material.substeps), energy_limit,
+                stop_on_inversion, state, control, work, forces, factor,
+                out._replace(positions=rows if scratch is None else scratch[:stop - start]),
             )
             done = stop if status == layout.OK else frame
-            if kernel_out is not out:  # into the mesh's vertex order
-                out.positions[start:done] = model.in_mesh_order(kernel_out.positions[start:done], axis=1)
+            if scratch is not None:  # into the mesh's vertex order
+                rows[:done - start] = model.in_mesh_order(scratch[:done - start], axis=1)
+            if on_frames is not None:
+                on_frames(start, rows[:done - start])
             if progress:
                 progress.advance(done, time.perf_counter() - started)
             if status != layout.OK or (progress and progress.cancelled):
@@ -153,10 +190,12 @@ def concurrent_kernels() -> bool:
         return False
 
 
-def diagnostics(frames: int, n: int) -> solver.Diagnostics:
+def diagnostics(frames: int, n: int, capacity: int | None = None) -> solver.Diagnostics:
     """Room for a run's output (``run``): positions, kinetic energy, inverted triangles and
-    smallest relative area per frame."""
-    return solver.Diagnostics(np.empty((frames, n, 3)), np.zeros(frames), np.zeros(frames, dtype=np.int64), np.zeros(frames))
+    smallest relative area per frame; positions for ``capacity`` frames alone, when
+    given (a streamed run's ring)."""
+    held = frames if capacity is None else min(capacity, frames)
+    return solver.Diagnostics(np.empty((held, n, 3)), np.zeros(frames), np.zeros(frames, dtype=np.int64), np.zeros(frames))
 
 
 def muscle_forces(model: Model, positions: np.ndarray, activation: np.ndarray) -> np.ndarray:

@@ -397,7 +397,9 @@ def _simulate(model, activations, start, stop, dt, substeps, energy_limit, stop_
     Within a frame the controls (jaw, eyelids) move linearly from the previous frame's
     values, so the targets never jump.
 
-    Writes ``out`` (Diagnostics). Returns (status, frame, element): OK, or the first frame
+    Writes ``out`` (Diagnostics): frame f's positions into ``out.positions[f - start]``
+    (the caller hands over rows for this piece alone: a streamed run keeps only a few),
+    the rest at f. Returns (status, frame, element): OK, or the first frame
     that is NOT_FINITE (element: a vertex), INVERTED (a triangle; only when
     ``stop_on_inversion``) or RUNAWAY (kinetic energy above ``energy_limit``).
     """
@@ -440,7 +442,7 @@ def _simulate(model, activations, start, stop, dt, substeps, energy_limit, stop_
         for i in range(n):
             for d in range(3):
                 energy += 0.5 * model.mass * v[i, d] * v[i, d]
-                out.positions[f, i, d] = x[i, d]
+                out.positions[f - start, i, d] = x[i, d]
         count, first, smallest = checks._triangle_checks(x, model.faces, model.rest_normal, model.rest_area,
                                                           model.rest_against, normals)
         out.kinetic_energy[f] = energy

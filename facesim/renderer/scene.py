@@ -314,7 +314,9 @@ class FaceRenderer:
 
         def prepare(k):  # into slot k mod 2, once the frame is simulated (facesim.animation.simulate: in the background)
             animation.ready(k)
-            return self._prepared_frame(animation, k, None if arrows is None else arrows[k], pose, k % 2)
+            prepared = self._prepared_frame(animation, k, None if arrows is None else arrows[k], pose, k % 2)
+            animation.release(k)  # its positions are in the slot's arrays now: a streamed run may reuse their room
+            return prepared
 
         with ThreadPoolExecutor(1, thread_name_prefix="facesim-frames") as pool:
             upcoming, finishing = pool.submit(prepare, 0), None
@@ -422,7 +424,7 @@ class FaceRenderer:
     def _prepared_frame(self, animation, k: int, arrows, pose, slot: int = 0) -> tuple:
         """``_prepared`` for frame ``k`` of an animation: its positions, jaw and pose (or
         ``pose`` instead), the arrays written into ``slot``."""
-        return self._prepared(animation.positions[k], arrows, animation.pose_at(k) if pose is None else pose,
+        return self._prepared(animation.positions_at(k), arrows, animation.pose_at(k) if pose is None else pose,
                               animation.jaw_at(k), slot)
 
     @classmethod
