@@ -466,3 +466,29 @@ def test_a_face_yamls_numbers_are_refused_in_one_line_or_plausible(faces, tmp_pa
         assert HEAD_SPAN[0] <= camera.scale * HEAD_WIDTH / camera.width <= HEAD_SPAN[1] and np.isfinite(camera.translation).all()
         outcomes.add("loaded")
     assert outcomes == {"refused", "loaded"}
+
+
+@pytest.mark.parametrize("name, message", [("muscles.yaml", "no face's muscle"),
+                                           ("face.yaml", "beyond 4.5 standard deviations")])
+def test_a_face_directorys_implausible_muscles_or_identity_are_one_line(faces, tmp_path, name, message):
+    """A face directory's muscles.yaml with a force of 1e150 ran to a face that never moved
+    (exit 0); its face.yaml with weights of 5.0 on all 100 modes drew a torn head."""
+    import shutil
+
+    import yaml
+
+    face = tmp_path / "me"
+    shutil.copytree(faces["astronaut"], face)
+    data = yaml.safe_load((face / name).read_text())
+    if name == "muscles.yaml":
+        data["muscles"][0]["force"] = 1e150
+    else:
+        data["identity"] = [5.0] * 100
+    (face / name).write_text(yaml.safe_dump(data))
+    target = tmp_path / "a.mp4"
+    result = subprocess.run([sys.executable, "-m", "facesim", "render", "happy", "--face", str(face), "-o", str(target),
+                             "--size", "64x64"], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
+    (line,) = result.stderr.strip().splitlines()
+    assert str(face / name) in line and message in line, line
+    assert not target.exists()
