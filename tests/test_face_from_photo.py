@@ -492,3 +492,19 @@ def test_a_face_directorys_implausible_muscles_or_identity_are_one_line(faces, t
     (line,) = result.stderr.strip().splitlines()
     assert str(face / name) in line and message in line, line
     assert not target.exists()
+
+
+def test_two_faces_side_by_side_are_found_and_the_choice_said(photos):
+    """Two faces side by side in one photo gave "no face found": MediaPipe's detector sees
+    the photo squeezed into its square, where each face is too small. Square crops of the
+    photo are looked in too; both faces are found, one is used, and that is said once."""
+    from facesim.face.photo import detect_landmarks, read_image
+
+    one = read_image(photos["astronaut"])
+    said = []
+    landmarks = detect_landmarks(np.concatenate([one, one], axis=1), "two.png", said.append)
+    alone = detect_landmarks(one, "one.png")
+    assert said == [said[0]] and "2 faces found" in said[0]
+    offset = landmarks[:, :2] - alone[:, :2]  # the same face, in one half or the other
+    assert np.abs(offset - np.median(offset, axis=0)).max() < 0.05 * np.ptp(alone[:, 0])
+    assert np.allclose(np.median(offset, axis=0), (0, 0), atol=3) or np.allclose(np.median(offset, axis=0), (512, 0), atol=3)
