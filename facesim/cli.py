@@ -130,7 +130,7 @@ def render(
     """Simulate one expression spec (or a blend of expressions) and render it."""
     from .animation.simulate import simulate
     from .animation.spec import blend_spec, load_spec
-    from .export.output import check_output, progress_bar, write_animation
+    from .export.output import check_output, drawn_in_order, progress_bar, write_animation
     from .physics.run import compiled_here
 
     positive(jobs, "--jobs")
@@ -167,10 +167,9 @@ def render(
     if frame is not None and (kind != "image" or not 0 <= frame < loaded.frames):
         raise InputError(f"--frame: with -o x.png, a frame from 0 to {loaded.frames - 1}, got {frame}" if kind == "image"
                          else f"--frame: only with a .png output (one frame), not {output}")
-    # drawn and encoded as its frames come; the muscles' arrows take every frame at once
-    # a video or frames read each frame once, in order: a few frames of positions in memory
-    stream = kind in ("mp4", "gif", "png") and not show_muscles and (jobs <= 1 or loaded.frames < 2 * jobs)
-    animation = simulate(loaded, notice=notice, background=True, with_muscle_forces=show_muscles, stream=stream)
+    # drawn and encoded as its frames come, from a few frames of positions where each is read once, in order
+    animation = simulate(loaded, notice=notice, background=True, with_muscle_forces=show_muscles,
+                         stream=drawn_in_order(kind, settings, loaded.frames, jobs))
     try:
         with progress_bar(animation.frames, f"rendering {loaded.title}") as advance:
             report = write_animation(animation, output, settings, fps, backend, jobs, advance, replace=force, frame=frame)

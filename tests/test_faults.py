@@ -748,3 +748,18 @@ def test_a_slow_warm_run_does_not_blame_compiling(tmp_path):
     last = result.stderr.strip().splitlines()[-1]
     seconds = float(last.split("simulation ")[1].split(" ms")[0]) / 1000
     assert seconds > 3 and "compil" not in last, last
+
+
+def test_unusual_identity_weights_are_said_once(tmp_path):
+    """Weights past 3.5 standard deviations on some mode (within the 4.5 that is refused)
+    make an unusual head: the run says so before it starts, once; a seed says nothing."""
+    from facesim.animation.simulate import simulate
+    from facesim.animation.spec import load_spec
+
+    for identity, expected in (([0.5, 3.8, -1.0], 1), ([0.5, 1.0], 0), (7, 0)):
+        spec = write_spec(tmp_path, frames=3, onset=1, identity=identity)
+        said = []
+        simulate(load_spec(spec), notice=said.append)
+        assert len(said) == expected, (identity, said)
+        if expected:
+            assert "weight 1 is 3.8" in said[0] and "unusual head" in said[0] and str(spec) in said[0]

@@ -24,6 +24,7 @@ import numpy as np
 from ..config import PARALLEL_FROM
 from ..errors import SimulationError
 from ..face.figure import figure_for
+from ..face.head import identity_notice
 from ..face.loading import load_face_model
 from ..physics.model import Model
 from ..physics.run import Progress, concurrent_kernels, diagnostics, muscle_forces, run
@@ -203,6 +204,9 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
     head's 468 vertices: 1,035 -> 988 ms and 1,048 -> 1,013."""
     model = model_for(spec)
     table = activation_table(spec, model.muscles)
+    unusual = identity_notice(spec.identity)  # weights the spec gives (a face directory's are its fit's)
+    if notice and unusual:
+        notice(f"{spec.source}: {unusual}")
     if notice and len(table) >= LONG_CLIP:
         expected = expected_seconds(model, table, spec.dt)
         if expected > LONG_RUN:
@@ -218,7 +222,7 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
     progress = Progress(held=len(table) - 1, capacity=capacity) if behind else None
     largest = [0.0]
 
-    def moved(start, block):
+    def moved(block):
         largest[0] = max(largest[0], float(np.abs(block - model.rest_position).max(initial=0.0)))
 
     def simulated():

@@ -5,7 +5,7 @@ The output kind follows the path as the user means it: ``.mp4``, ``.gif``, ``.np
 ``.png`` (one frame, the apex unless another is asked for), and a directory of
 ``frame_0000.png`` ... for a path that ends in a slash, is a directory already, or has no
 suffix. Every output is written under a temporary name and renamed into
-place when complete (``writers.atomic_path``).
+place when complete (``files.atomic_path``).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import sys
 import time
-from contextlib import nullcontext
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -68,6 +68,7 @@ def _verify_frames(kind: str, count: int, fps: float):
     """A check that a written output reads back with all ``count`` frames. A GIF holds a
     run of identical frames as one frame shown that much longer (Pillow merges them), so
     its frames are counted by their durations."""
+    name = "PNG" if kind == "image" else kind.upper()
 
     def verify(tmp: Path) -> None:
         try:
@@ -83,18 +84,18 @@ def _verify_frames(kind: str, count: int, fps: float):
                     for k in range(image.n_frames):
                         image.seek(k)
                         found += max(1, round(image.info.get("duration", 1000.0 / fps) * fps / 1000.0))
-            else:
+            else:  # a directory of frames, or one frame
                 from PIL import Image
 
                 found = 0
-                for png in sorted(tmp.glob("frame_*.png")):
+                for png in [tmp] if kind == "image" else sorted(tmp.glob("frame_*.png")):
                     with Image.open(png) as image:
                         image.verify()
                     found += 1
         except Exception as exc:  # a truncated file fails in many ways
-            raise WriteError(f"the written {kind.upper()} does not read back ({type(exc).__name__}){why_short(tmp)}") from None
+            raise WriteError(f"the written {name} does not read back ({type(exc).__name__}){why_short(tmp)}") from None
         if found != count:
-            raise WriteError(f"the written {kind.upper()} holds {found} of {count} frames{why_short(tmp)}")
+            raise WriteError(f"the written {name} holds {found} of {count} frames{why_short(tmp)}")
 
     return verify
 
@@ -120,6 +121,30 @@ def render_frames(animation: Animation, settings: RenderSettings, backend: str =
     return np.stack(list(iter_frames(animation, settings, backend, jobs, progress, renderer)))
 
 
+def in_one_process(frames: int, jobs: int) -> bool:
+    """Whether ``frames`` are drawn here rather than split over ``jobs`` processes."""
+    return jobs <= 1 or frames < 2 * jobs
+
+
+def drawn_in_order(kind: str, settings: RenderSettings, frames: int, jobs: int) -> bool:
+    """Whether an output of ``kind`` reads each frame once, in order, in this process: a
+    video or a directory of frames, without the muscles' arrows (which take every frame
+    at once). Such an animation may be simulated streamed (facesim.animation.simulate)."""
+    return kind in ("mp4", "gif", "png") and not settings.show_muscles and in_one_process(frames, jobs)
+
+
+@contextmanager
+def _renderer_for(animation: Animation, settings: RenderSettings, backend: str, renderer: FaceRenderer | None):
+    """``renderer``, or one of the animation's own, closed after the block."""
+    own = renderer is None
+    renderer = renderer or FaceRenderer.of(animation, settings, backend)
+    try:
+        yield renderer
+    finally:
+        if own:
+            renderer.close()
+
+
 def iter_frames(animation: Animation, settings: RenderSettings, backend: str = "auto", jobs: int = 1,
                 progress=None, renderer: FaceRenderer | None = None):
     """The frames of an animation, (height, width, 3) uint8 each, in order, as they are
@@ -130,27 +155,22 @@ def iter_frames(animation: Animation, settings: RenderSettings, backend: str = "
     own renderer. ``renderer`` lets a caller reuse one across animations of one mesh.
     """
     frames = animation.frames
-    in_process = jobs <= 1 or frames < 2 * jobs
+    in_process = in_one_process(frames, jobs)
     if settings.show_muscles or not in_process:
         animation.ready()  # the arrows, and the processes' chunks, take every frame at once
     arrows = arrows_for(animation) if settings.show_muscles else None
     if in_process:
-        own = renderer is None
-        renderer = renderer or FaceRenderer.of(animation, settings, backend)
-        try:
+        with _renderer_for(animation, settings, backend, renderer) as renderer:
             for image in renderer.frames(animation, arrows):
                 check_terminated()  # a signal that the OpenGL wrappers swallowed stops here
                 yield image
                 if progress:
                     progress(1)
-        finally:
-            if own:
-                renderer.close()
         return
-    bounds = np.linspace(0, frames, jobs * 2 + 1).astype(int)
-    pose = animation.pose
     if animation.streamed:
         raise ValueError("a streamed animation is drawn in order in one process")
+    bounds = np.linspace(0, frames, jobs * 2 + 1).astype(int)
+    pose = animation.pose
     chunks = [(animation.positions[a:b], None if arrows is None else arrows[a:b], None if pose is None else pose[a:b],
                animation.jaw[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
     fixed = [(animation.rest, animation.faces, settings, backend, animation.figure, animation.face)] * len(chunks)
@@ -206,16 +226,7 @@ def write_image(image: np.ndarray, path: Path, replace: bool = True) -> None:
     """One frame as a PNG, atomically, read back before it is renamed into place."""
     import imageio.v3 as iio
 
-    def verify(tmp: Path) -> None:
-        from PIL import Image
-
-        try:
-            with Image.open(tmp) as written:
-                written.verify()
-        except Exception as exc:  # a truncated file fails in many ways
-            raise WriteError(f"the written PNG does not read back ({type(exc).__name__}){why_short(tmp)}") from None
-
-    with atomic_path(path, replace=replace, verify=verify) as tmp:
+    with atomic_path(path, replace=replace, verify=_verify_frames("image", 1, 1.0)) as tmp:
         iio.imwrite(tmp, image)
 
 
@@ -273,21 +284,14 @@ def write_animation(animation: Animation, path: str | Path, settings: RenderSett
         write_npz(animation.ready(), path, replace)
     elif kind == "image":
         k = animation.apex_frame if frame is None else frame
-        own = renderer is None
-        renderer = renderer or FaceRenderer.of(animation, settings, backend)
-        try:
+        with _renderer_for(animation, settings, backend, renderer) as renderer:
             image = renderer.frame(animation.ready(k), k, arrows_for(animation)[k] if settings.show_muscles else None)
-        finally:
-            if own:
-                renderer.close()
         write_image(image, path, replace)
-        return RenderReport(animation.name, path, len(animation.active_muscles), 1, animation.simulation_seconds,
-                            time.perf_counter() - start)
     else:
         frames = iter_frames(animation, settings, backend, jobs, progress, renderer)
         write_frames(frames, path, kind, fps or animation.fps, replace, count=animation.frames)
-    return RenderReport(animation.name, path, len(animation.active_muscles), animation.frames, animation.simulation_seconds,
-                        time.perf_counter() - start)
+    return RenderReport(animation.name, path, len(animation.active_muscles), 1 if kind == "image" else animation.frames,
+                        animation.simulation_seconds, time.perf_counter() - start)
 
 
 def render(animation: Animation, path: str | Path, settings: RenderSettings | None = None, force: bool = False,
@@ -296,7 +300,6 @@ def render(animation: Animation, path: str | Path, settings: RenderSettings | No
     an MP4, GIF, NPZ or a directory of PNG frames by its name, drawn with ``settings``
     (512x512 from the front by default). ``force``: replace an output facesim wrote
     before. The path is checked before anything is drawn (InputError)."""
-    path = Path(path)
     settings = (settings or RenderSettings()).for_face(animation.face)
     check_output(path, force, settings)
     return write_animation(animation, path, settings, backend=backend, replace=force)

@@ -173,9 +173,9 @@ def identity_weights(identity: int | list[float] | None) -> np.ndarray:
             raise InputError(f"identity: a seed must be a non-negative integer, got {identity}")
         return np.random.default_rng(int(identity)).standard_normal(IDENTITY_MODES)
     values = np.asarray(identity, dtype=np.float64)
-    if values.ndim != 1 or len(values) > IDENTITY_MODES or not np.isfinite(values).all():
+    if values.ndim != 1 or len(values) > IDENTITY_MODES:
         raise InputError(f"identity: expected a seed or at most {IDENTITY_MODES} finite weights, got {len(values)} values")
-    problem = identity_problem(values)
+    problem = identity_problem(values)  # finite, and a person's
     if problem:
         raise InputError(f"identity: {problem}")
     weights[: len(values)] = values

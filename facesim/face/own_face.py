@@ -98,9 +98,9 @@ def _load_face_directory(path: Path, stamp: tuple) -> FaceDirectory:
         weights = np.asarray(identity, dtype=np.float64)
     except (TypeError, ValueError):
         weights = np.zeros(0)
-    if weights.shape != (IDENTITY_MODES,) or not np.isfinite(weights).all():
+    if weights.shape != (IDENTITY_MODES,):
         raise InputError(f"{record_path}: identity: expected {IDENTITY_MODES} finite weights")
-    problem = identity_problem(weights)
+    problem = identity_problem(weights)  # finite, and a person's
     if problem:
         raise InputError(f"{record_path}: identity: {problem}")
     if not isinstance(record.get("camera"), dict):

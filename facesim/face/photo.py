@@ -83,34 +83,52 @@ def detect_landmarks(image: np.ndarray, source: str, notice=None, refine: bool =
     identities, fitting the head to them (facesim.face.fit): the whole head's RMS from the truth
     falls from 0.387 to 0.382 cm (mean; median 0.385 to 0.362) on 30 identities, and from
     0.370 to 0.322 on five others."""
-    faces = _faces_in(image, refine)
-    if not faces:  # MediaPipe's detector sees the photo squeezed into a square: look in square crops of it too
-        side = min(image.shape[:2])
-        for y0 in _crop_starts(image.shape[0], side):
-            for x0 in _crop_starts(image.shape[1], side):
-                found = _faces_in(image[y0:y0 + side, x0:x0 + side], refine)
-                faces += [face + (x0, y0, 0.0) for face in found if not _seen(face + (x0, y0, 0.0), faces)]
+    with _face_mesh(refine) as faces_in:
+        faces = faces_in(image)
+        if not faces:  # MediaPipe's detector sees the photo squeezed into a square: look in square crops of it too
+            side = min(image.shape[:2])
+            for y0 in _crop_starts(image.shape[0], side):
+                for x0 in _crop_starts(image.shape[1], side):
+                    for face in faces_in(image[y0:y0 + side, x0:x0 + side]):
+                        face += (x0, y0, 0.0)  # into the photo's pixels
+                        if not _seen(face, faces):
+                            faces.append(face)
     if not faces:
         raise InputError(f"{source}: no face found in the image")
-    sizes = [float(np.ptp(face[:, :2], axis=0).max()) for face in faces]
+    sizes = [_across(face) for face in faces]
     largest = int(np.argmax(sizes))
     if len(faces) > 1 and notice is not None:
         notice(f"{source}: {len(faces)} faces found; using the largest ({sizes[largest]:.0f} pixels across)")
     return faces[largest]
 
 
-def _faces_in(image: np.ndarray, refine: bool) -> list[np.ndarray]:
-    """The faces MediaPipe's face mesh finds in an image: (468, 3) pixels each."""
-    height, width = image.shape[:2]
+@contextlib.contextmanager
+def _face_mesh(refine: bool):
+    """A function giving the faces MediaPipe's face mesh finds in an image, (468, 3) pixels
+    each; one graph for every image it is given within the block (each found afresh)."""
     with quiet_stderr():
         import mediapipe as mp
 
-        with mp.solutions.face_mesh.FaceMesh(
-            static_image_mode=True, max_num_faces=MAX_FACES, refine_landmarks=refine, min_detection_confidence=0.5
-        ) as face_mesh:
+        face_mesh = mp.solutions.face_mesh.FaceMesh(
+            static_image_mode=True, max_num_faces=MAX_FACES, refine_landmarks=refine, min_detection_confidence=0.5)
+
+    def faces_in(image: np.ndarray) -> list[np.ndarray]:
+        height, width = image.shape[:2]
+        with quiet_stderr():
             result = face_mesh.process(np.ascontiguousarray(image[:, :, :3]))
-    return [np.array([(p.x * width, p.y * height, p.z * width) for p in face.landmark[:LANDMARKS]], dtype=np.float64)
-            for face in result.multi_face_landmarks or []]
+        return [np.array([(p.x * width, p.y * height, p.z * width) for p in face.landmark[:LANDMARKS]], dtype=np.float64)
+                for face in result.multi_face_landmarks or []]
+
+    try:
+        yield faces_in
+    finally:
+        with quiet_stderr():
+            face_mesh.close()
+
+
+def _across(face: np.ndarray) -> float:
+    """How many pixels a face's landmarks span, its larger side."""
+    return float(np.ptp(face[:, :2], axis=0).max())
 
 
 def _crop_starts(length: int, side: int) -> list[int]:
@@ -124,8 +142,7 @@ def _crop_starts(length: int, side: int) -> list[int]:
 def _seen(face: np.ndarray, faces: list[np.ndarray]) -> bool:
     """Whether a face found in one crop is one already found in another (nose tips within
     a tenth of its size)."""
-    size = float(np.ptp(face[:, :2], axis=0).max())
-    return any(np.linalg.norm(face[NOSE_TIP, :2] - other[NOSE_TIP, :2]) < 0.1 * size for other in faces)
+    return any(np.linalg.norm(face[NOSE_TIP, :2] - other[NOSE_TIP, :2]) < 0.1 * _across(face) for other in faces)
 
 
 @contextlib.contextmanager

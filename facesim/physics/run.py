@@ -116,8 +116,8 @@ def run(
     one (facesim.config). With ``progress``, ``STREAMED_FRAMES`` frames a call, each
     reported done as soon as it is in ``out``, and the run stops early when cancelled;
     ``out.positions`` may then hold fewer frames than the run, a ring reused in turn as
-    the caller releases frames (``Progress``). ``on_frames(start, positions)`` sees each
-    piece's positions (k, n, 3), in the mesh's order, as they are written."""
+    the caller releases frames (``Progress``). ``on_frames(positions)`` sees each piece's
+    positions (k, n, 3), in the mesh's order, as they are written."""
     frames = len(activations)
     if activations.ndim != 2 or activations.shape[1] != len(model.muscles.names):
         raise ValueError(f"activations must be (frames, {len(model.muscles.names)}), one column per muscle and control")
@@ -159,7 +159,7 @@ def run(
             if scratch is not None:  # into the mesh's vertex order
                 rows[:done - start] = model.in_mesh_order(scratch[:done - start], axis=1)
             if on_frames is not None:
-                on_frames(start, rows[:done - start])
+                on_frames(rows[:done - start])
             if progress:
                 progress.advance(done, time.perf_counter() - started)
             if status != layout.OK or (progress and progress.cancelled):
