@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 APT_PACKAGES := libosmesa6 libegl1 libegl-mesa0 libgl1-mesa-dri
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: setup system-packages demo test bench realism mesh docs clean
+.PHONY: setup system-packages demo test bench kernels realism mesh docs clean
 
 system-packages:
 	@missing=""; for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
@@ -38,6 +38,10 @@ test: setup $(VENV)/.photo
 
 bench: setup
 	$(BIN)/python scripts/bench.py
+
+# the kernels that ship compiled (facesim/compiled): run after any change to a file with kernels
+kernels: setup
+	$(BIN)/python scripts/build_kernels.py
 
 # facesim's action units against ICT FaceKit's scanned FACS shapes (../shared/ict-facekit)
 realism: setup

@@ -126,12 +126,18 @@ def render(
     onto: Optional[Path] = typer.Option(None, "--onto", help="render through the face's fitted camera into this photo "
                                         "(the one it was fitted to), at its size: the photo comes alive"),
     blend: Optional[str] = typer.Option(None, "--blend", help="blend expressions, e.g. happy=0.6,surprise=0.4"),
+    timings: bool = typer.Option(False, "--timings", help="say where the time went: imports, kernels (loaded or "
+                                 "compiled), model, figure, GL context, simulation, drawing, encoding"),
 ):
     """Simulate one expression spec (or a blend of expressions) and render it."""
+    from . import timings as phases
     from .animation.simulate import simulate
     from .animation.spec import blend_spec, load_spec
     from .export.output import check_output, drawn_in_order, progress_bar, write_animation
     from .physics.run import compiled_here
+
+    if timings:
+        phases.start()
 
     positive(jobs, "--jobs")
     jobs = capped_jobs(jobs, notice)
@@ -178,6 +184,9 @@ def render(
     compiled = " (this run compiled the Numba kernels; later runs load them from cache)" if compiled_here() else ""
     typer.echo(f"wrote {output}: {report.frames} frames, simulation {report.simulation_seconds * 1000:.1f} ms, "
                f"render {report.render_seconds:.2f} s{compiled}", err=True)
+    if timings:
+        phases.add("simulation", report.simulation_seconds)
+        typer.echo(phases.summary(phases.process_age()), err=True)
 
 
 @app.command()

@@ -37,16 +37,17 @@ PROJECT_DIR = PACKAGE_DIR.parent
 def _code_digest() -> str:
     """A hash of the code facesim's compiled kernels are made of, and the package's name:
     what the kernels and the implicit step's cached factors (facesim.cache) are keyed by.
-    The code: every .py file that uses Numba, and this one, whose constants the kernels
-    read as they compile; the rest (the command line, the specs, the writers) cannot
-    change a compiled kernel, and keying on it made every edit there compile everything
-    again, a minute and more. The package's name too: a compiled kernel names the module
+    The code: every .py file with a kernel (``njit``), this one and physics/layout.py,
+    whose constants the kernels read as they compile; the rest (the command line, the
+    specs, the writers, facesim.timings' use of Numba's events) cannot change a
+    compiled kernel, and keying on it made every edit there compile everything again, a
+    minute and more. The package's name too: a compiled kernel names the module
     it was compiled in, and the same code imported under another name (a vendored copy)
     cannot load it."""
     digest = hashlib.sha1(__name__.rpartition(".")[0].encode() + b"\0")
     for path in sorted(PACKAGE_DIR.rglob("*.py")):
         code = path.read_bytes()
-        if path.name == "config.py" or b"numba" in code:
+        if path.relative_to(PACKAGE_DIR).as_posix() in ("config.py", "physics/layout.py") or b"njit" in code:
             digest.update(path.relative_to(PACKAGE_DIR).as_posix().encode() + b"\0" + code)
     return digest.hexdigest()
 
@@ -54,9 +55,31 @@ def _code_digest() -> str:
 CODE_DIGEST = _code_digest()
 
 
-def _key_numba_cache() -> None:
+def _portable_target() -> None:
+    """Compile facesim's kernels for x86-64's (or the machine's) baseline, not for this
+    CPU, so that kernels compiled on one machine run on every other: the ones that ship
+    compiled (``_install_shipped_kernels``) and a cache shared over a network. Unless
+    the user chose (``NUMBA_CPU_NAME``), ``NUMBA_CPU_NAME=generic`` is set for this
+    process and its children, before Numba compiles anything here; what it costs, the
+    baseline's instructions against the host's (no AVX or FMA), was 12% of the
+    simulation's time on the head (19.7 against 22.2 ms for happy, medians of 7, measured
+    on 2026-12-04). Numba keys every compiled kernel by its CPU, so kernels of either
+    kind are never mixed up."""
+    import numba
+    from numba.core.registry import cpu_target
+
+    if "NUMBA_CPU_NAME" in os.environ or "_toplevel_target_context" in vars(cpu_target):
+        return  # the user's choice, or Numba already compiled in this process for its CPU
+    os.environ["NUMBA_CPU_NAME"] = "generic"  # and NUMBA_CPU_FEATURES="" with it (Numba)
+    numba.config.reload_config()
+
+
+_portable_target()
+
+
+def _key_numba_cache() -> str:
     """Keep facesim's compiled kernels in a directory named by a hash of facesim's code,
-    wherever facesim is installed.
+    wherever facesim is installed; returns that directory.
 
     Numba's cache knows a kernel is stale only when the kernel's own file changes: a
     kernel of facesim.physics.solver compiled with facesim.physics' callees inlined is loaded
@@ -67,10 +90,12 @@ def _key_numba_cache() -> None:
     minute). So facesim's kernels are found by ``CodeKeyedLocator``, put first among
     Numba's cache locators: under ``$NUMBA_CACHE_DIR`` if set, else facesim's cache
     directory (facesim.cache), in ``numba-<hash of facesim's .py files and the
-    package's name>``, the same for every copy of the same code. Numba's own check of
-    each file's contents stays, and it keys each entry by its CPU and Numba version.
-    Runs before any facesim kernel is decorated: every module that compiles one takes
-    its options from here. Other packages' kernels keep Numba's own locators."""
+    package's name>``, the same for every copy of the same code. A kernel's entry is
+    fresh while that hash is the same (its stamp; Numba's own, the file's modification
+    time, made every clone and checkout compile again), and Numba keys each entry by its
+    CPU and Numba version. Runs before any facesim kernel is decorated: every module
+    that compiles one takes its options from here. Other packages' kernels keep Numba's
+    own locators."""
     import numba
     from numba.core import caching
 
@@ -86,6 +111,9 @@ def _key_numba_cache() -> None:
             subpackage = Path(py_file).resolve().parent.relative_to(PACKAGE_DIR)
             self._cache_path = os.path.join(numba.config.CACHE_DIR or os.fspath(directory()), folder, subpackage)
 
+        def get_source_stamp(self):
+            return CODE_DIGEST
+
         @classmethod
         def from_function(cls, py_func, py_file):
             if not Path(py_file).resolve().is_relative_to(PACKAGE_DIR):
@@ -97,9 +125,63 @@ def _key_numba_cache() -> None:
     implementation = getattr(caching, "CacheImpl", None) or caching._CacheImpl
     implementation._locator_classes = [CodeKeyedLocator] + [
         c for c in implementation._locator_classes if c.__name__ != "CodeKeyedLocator"]
+    return os.path.join(numba.config.CACHE_DIR or os.fspath(directory()), folder)
 
 
-_key_numba_cache()
+#: The kernels compiled ahead, shipped inside the package (scripts/build_kernels.py):
+#: ``kernels.tar.xz`` holds a Numba cache folder (``_key_numba_cache``) and
+#: ``kernels.json`` what it was compiled from and for.
+SHIPPED_KERNELS = PACKAGE_DIR / "compiled"
+
+
+def shipped_kernels_key() -> dict:
+    """What shipped kernels must have been compiled from and for to be loaded here:
+    this code, this Numba, this Python and machine, the baseline CPU."""
+    import platform
+    import sys
+
+    import numba
+
+    return dict(code=CODE_DIGEST, numba=numba.__version__, python=f"py{sys.version_info[0]}{sys.version_info[1]}",
+                machine=platform.machine(), cpu=numba.config.CPU_NAME)
+
+
+def _install_shipped_kernels(folder: str) -> None:
+    """Put the kernels that ship compiled where Numba looks for facesim's (``folder``)
+    the first time this code runs, when they were compiled from this code for this
+    Numba, Python and machine: a new user's first render loads them instead of
+    compiling about a minute (scripts/build_kernels.py). A kernel they lack (a large
+    mesh's parallel ones) compiles as before and joins them. Unpacked beside the folder
+    and renamed into place; any failure (a read-only cache, a damaged archive) leaves
+    Numba to compile, as without them."""
+    archive, stamp = SHIPPED_KERNELS / "kernels.tar.xz", SHIPPED_KERNELS / "kernels.json"
+    if os.environ.get("FACESIM_SHIPPED_KERNELS") == "0" or os.path.exists(folder) or not stamp.is_file():
+        return
+    import contextlib
+    import json
+    import shutil
+    import tarfile
+    import tempfile
+
+    try:
+        if json.loads(stamp.read_text()) != shipped_kernels_key():
+            return
+        os.makedirs(os.path.dirname(folder), exist_ok=True)
+        unpacked = tempfile.mkdtemp(prefix=f".{os.path.basename(folder)}.", dir=os.path.dirname(folder))
+    except (OSError, ValueError):
+        return
+    try:
+        with tarfile.open(archive) as tar:
+            tar.extractall(unpacked, filter="data")
+        os.rename(unpacked, folder)  # fails if another process was first: its copy is as good
+    except (OSError, tarfile.TarError):
+        pass
+    finally:
+        with contextlib.suppress(OSError):
+            shutil.rmtree(unpacked)
+
+
+_install_shipped_kernels(_key_numba_cache())
 
 
 def _prefer_openmp() -> None:

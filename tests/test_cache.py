@@ -77,7 +77,7 @@ def test_a_copy_of_the_same_code_elsewhere_loads_the_compiled_kernels(tmp_path):
     shutil.copytree(PACKAGE_DIR, copy / "facesim", ignore=shutil.ignore_patterns("__pycache__", "meshes", "expressions"))
 
     def hits_and_misses(root, package="facesim"):
-        env = dict(os.environ, PYTHONPATH=str(root), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+        env = dict(os.environ, PYTHONPATH=str(root), NUMBA_CACHE_DIR=str(tmp_path / "cache"), FACESIM_SHIPPED_KERNELS="0")
         result = subprocess.run([sys.executable, "-c", COMPILED, package], capture_output=True, text=True, env=env,
                                 cwd=tmp_path, timeout=300)
         assert result.returncode == 0, result.stderr[-2000:]

@@ -675,10 +675,32 @@ def test_outputs_by_intent(tmp_path):
     assert len(frames) == 35 and not (tmp_path / "b.png").exists()
 
 
+FORK_WHILE_THREADED = """
+import os, threading
+from facesim.animation.simulate import model_for
+from facesim.animation.spec import activation_table, load_spec
+from facesim.config import LIBRARY
+from facesim.physics.run import run
+spec = load_spec(LIBRARY / "happy.yaml")
+model = model_for(spec)
+table = activation_table(spec, model.muscles)
+run(model, table[:1], spec.dt, threads=2)  # the threading layer's pool started on this thread, as a render's
+running = threading.Thread(target=lambda: [run(model, table, spec.dt, threads=2) for _ in range(20)])
+running.start()
+while running.is_alive():  # forked as ffmpeg is: with the fork handlers (Python's own spawning may skip them)
+    child = os.fork()
+    if child == 0:
+        os._exit(0)
+    os.waitpid(child, 0)
+"""
+
+
 def test_stdout_carries_nothing_facesim_did_not_mean(tmp_path):
     """With TBB installed, Numba's pool wrote "Unable to join threads to shut down before
-    fork()" on stdout at every MP4 (ffmpeg is a forked process). facesim prefers OpenMP
-    (facesim.config._prefer_openmp); asked to prefer TBB again, the noise is back, so this
+    fork()" on stdout when a process forked (ffmpeg for every MP4) while a parallel
+    kernel ran on another thread. facesim prefers OpenMP (facesim.config._prefer_openmp):
+    a render's stdout is empty, and so is that of a process forking while facesim's
+    parallel kernels run beside it; asked to prefer TBB again, the noise is back, so this
     test can tell."""
     import importlib.util
 
@@ -688,9 +710,14 @@ def test_stdout_carries_nothing_facesim_did_not_mean(tmp_path):
     env.pop("NUMBA_THREADING_LAYER", None)
     quiet = facesim("render", "happy", "-o", tmp_path / "a.mp4", "--size", "32x32", env=env, check=0)
     assert quiet.stdout == ""
-    noisy = facesim("render", "happy", "-o", tmp_path / "b.mp4", "--size", "32x32", check=0,
-                    env=dict(env, NUMBA_THREADING_LAYER_PRIORITY="tbb omp workqueue"))
-    assert "Unable to join threads" in noisy.stdout
+
+    def forking(**changes):
+        return subprocess.run([sys.executable, "-c", FORK_WHILE_THREADED], capture_output=True, text=True,
+                              env=dict(env, **changes), timeout=300)
+
+    quiet = forking()
+    assert quiet.stdout == "" and "fork" not in quiet.stderr
+    assert "Unable to join threads" in forking(NUMBA_THREADING_LAYER_PRIORITY="tbb omp workqueue").stdout
 
 
 def test_a_long_clip_is_announced_from_its_measured_speed(monkeypatch):

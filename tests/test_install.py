@@ -23,7 +23,8 @@ def test_the_wheel_installs_into_a_fresh_environment_and_renders_from_another_di
     wheel = next((tmp_path / "dist").glob("facesim-*.whl"))
     names = set(zipfile.ZipFile(wheel).namelist())
     for data in ("meshes/ict/head.npz", "meshes/ict/head.muscles.yaml", "meshes/ict/LICENSE", "meshes/face.obj",
-                 "meshes/face.muscles.yaml", "meshes/NOTICE", "expressions/happy.yaml", "expressions/blends/happy_surprise.yaml"):
+                 "meshes/face.muscles.yaml", "meshes/NOTICE", "expressions/happy.yaml", "expressions/blends/happy_surprise.yaml",
+                 "compiled/kernels.tar.xz", "compiled/kernels.json", "compiled/README.md"):
         assert f"facesim/{data}" in names, data
 
     venv = tmp_path / "venv"

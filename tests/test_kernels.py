@@ -524,3 +524,25 @@ def test_parallel_loops_give_the_same_bits_on_one_thread_as_on_two(tmp_path, pre
     both = run(model, table, s.dt, threads=2)[0]
     assert np.abs(one[-1] - model.rest_position).max() > 0.01
     assert np.array_equal(one, both)
+
+
+def test_a_small_mesh_runs_the_serial_twins_and_they_move_the_face_as_the_parallel_kernels_do():
+    """The head's 468-vertex skin runs the kernels' serial twins (facesim.physics.twins:
+    compiled without parallel loops, a minute less to compile): the simulation that
+    ``run`` calls by default is ``_simulate``'s twin, whose calls reach no parallel kernel,
+    and it moves the face as the parallel kernels on one thread do, to rounding."""
+    from facesim.physics import solver, twins
+
+    s = spec("happy", frames=8)
+    model = model_for(s)
+    assert model.vertex_count < PARALLEL_FROM
+    twin = twins.serial(solver._simulate)
+    assert twin is not solver._simulate and twins.for_mesh(solver._simulate, model.vertex_count) is twin
+    assert not twins.parallel(twin) and twins.parallel(solver._simulate)
+    assert twins.for_mesh(solver._simulate, 30_000) is solver._simulate
+    table = activation_table(s, model.muscles)
+    serial = run(model, table, s.dt)[0]
+    parallel = run(model, table, s.dt, threads=1)[0]
+    moved = np.abs(serial[-1] - model.rest_position).max()
+    assert moved > 0.05
+    assert np.abs(serial - parallel).max() < 1e-9 * moved

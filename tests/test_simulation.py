@@ -211,26 +211,24 @@ def test_a_background_simulation_that_diverges_raises_at_the_first_frame_it_did_
         animation.ready(failed)
 
 
-def test_without_a_thread_safe_numba_layer_the_simulation_runs_before_the_frames(monkeypatch):
-    """Numba's own workqueue layer (a machine without libgomp or TBB) stops the process when
-    two threads start parallel loops at once: the renderer's kernels and the simulation's."""
+def test_a_small_face_is_simulated_beside_its_drawing_on_serial_kernels_with_any_threading_layer(monkeypatch):
+    """A face below PARALLEL_FROM vertices runs the kernels' serial twins (facesim.physics.twins),
+    which start no parallel loop: so it is simulated on a thread of its own even where
+    Numba's threading layer is its workqueue, which stops the process when two threads
+    start parallel loops at once (the renderer's filters run on every core). A larger
+    mesh's simulation wants both cores, which the renderer already keeps busy: overlapped,
+    a 6,990-vertex face rendered slower, not faster (facesim.animation.simulate.simulate),
+    so it is simulated before its frames are drawn."""
     import numba
+
+    from facesim.physics import solver, twins
 
     monkeypatch.setattr(numba, "threading_layer", lambda: "workqueue")
     animation = facesim.simulate(spec("happy"), background=True)
-    assert animation.progress is None and animation.seconds > 0
-    assert np.array_equal(animation.positions, facesim.simulate(spec("happy")).positions)
-
-
-def test_a_mesh_simulated_on_every_core_is_simulated_before_its_frames_are_drawn(monkeypatch):
-    """Its simulation wants both cores, which the renderer already keeps busy: overlapped, a
-    6,990-vertex face rendered slower, not faster (facesim.animation.simulate.simulate)."""
-    import sys
-
-    simulate_module = sys.modules["facesim.animation.simulate"]  # the module: facesim.animation.simulate is the function
-
-    assert facesim.simulate(spec("happy", frames=3), background=True).progress is not None
-    monkeypatch.setattr(simulate_module, "PARALLEL_FROM", 0)  # the Hopper face as if it were large
+    assert animation.progress is not None
+    assert not twins.parallel(twins.for_mesh(solver._simulate, animation.model.vertex_count))
+    assert np.array_equal(animation.ready().positions, facesim.simulate(spec("happy")).positions)
+    monkeypatch.setattr(twins, "PARALLEL_FROM", 0)  # the Hopper face as if it were large
     assert facesim.simulate(spec("happy", frames=3), background=True).progress is None
 
 

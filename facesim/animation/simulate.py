@@ -21,13 +21,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config import PARALLEL_FROM
 from ..errors import SimulationError
 from ..face.figure import figure_for
 from ..face.head import identity_notice
 from ..face.loading import load_face_model
 from ..physics.model import Model
-from ..physics.run import Progress, concurrent_kernels, diagnostics, muscle_forces, run
+from ..physics.run import Progress, diagnostics, muscle_forces, run
+from ..physics.twins import on_threads
+from ..timings import phase
 from .spec import Spec, activation_table, pose_table
 
 #: A run expected to take longer than this (s) is announced before it starts.
@@ -184,10 +185,9 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
              with_muscle_forces: bool = False, stream: bool = False) -> Animation:
     """Simulate an expression spec from the neutral face. ``notice`` receives a one-line
     estimate before a run expected to take minutes. ``background``: return at once and
-    simulate on a thread of its own (module docstring), where Numba allows it
-    (``concurrent_kernels``) and the mesh is simulated on one thread (fewer than
-    ``PARALLEL_FROM`` vertices); the spec, mesh and muscles are checked before it starts
-    either way. ``with_muscle_forces``: the muscles' forces on every frame too
+    simulate on a thread of its own (module docstring) when the mesh runs the serial
+    kernels (fewer than ``PARALLEL_FROM`` vertices: facesim.physics.twins); the spec,
+    mesh and muscles are checked before it starts either way. ``with_muscle_forces``: the muscles' forces on every frame too
     (``Animation.muscle_force``, what ``--show-muscles`` draws), after a simulation on
     this thread. ``stream`` (with ``background``): keep ``STREAMED_RING`` frames of
     positions, each simulated once the caller has released the frame that many before
@@ -202,7 +202,8 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
     overlapped with the simulation on two threads (whose loops wait at their ends for
     the thread the renderer holds off its core), 1,103 against 1,268 on one thread. The
     head's 468 vertices: 1,035 -> 988 ms and 1,048 -> 1,013."""
-    model = model_for(spec)
+    with phase("model"):
+        model = model_for(spec)
     table = activation_table(spec, model.muscles)
     unusual = identity_notice(spec.identity)  # weights the spec gives (a face directory's are its fit's)
     if notice and unusual:
@@ -212,7 +213,7 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
         if expected > LONG_RUN:
             notice(f"{spec.source}: {len(table):,} frames of {model.vertex_count:,} vertices: about "
                    f"{expected / 60:.0f} minutes of simulation, as its first frames ran here (Ctrl-C stops it)")
-    behind = background and not with_muscle_forces and concurrent_kernels() and model.vertex_count < PARALLEL_FROM
+    behind = background and not with_muscle_forces and not on_threads(model.vertex_count)
     capacity = STREAMED_RING if behind and stream and len(table) > STREAMED_RING else None
     held = len(table) * model.vertex_count * 3 * 8
     if notice and capacity is None and held > LARGE_CLIP:

@@ -10,6 +10,7 @@ place when complete (``files.atomic_path``).
 
 from __future__ import annotations
 
+import itertools
 import os
 import sys
 import time
@@ -24,6 +25,7 @@ from ..errors import InputError
 from ..files import WriteError, atomic_path, check_destination, check_terminated
 from ..renderer.scene import FaceRenderer, shared_renderer
 from ..renderer.settings import RenderSettings
+from ..timings import phase
 from ..workers import worker_pool
 
 FULL_DISK = 1 << 20  # bytes free under which a short output is put down to a full disk
@@ -137,7 +139,11 @@ def drawn_in_order(kind: str, settings: RenderSettings, frames: int, jobs: int) 
 def _renderer_for(animation: Animation, settings: RenderSettings, backend: str, renderer: FaceRenderer | None):
     """``renderer``, or one of the animation's own, closed after the block."""
     own = renderer is None
-    renderer = renderer or FaceRenderer.of(animation, settings, backend)
+    if own:
+        with phase("figure"):
+            animation.figure  # the head's skin weights, built or read from facesim's cache
+        with phase("GL context"):
+            renderer = FaceRenderer.of(animation, settings, backend)
     try:
         yield renderer
     finally:
@@ -190,10 +196,12 @@ def write_frames(frames, path: Path, kind: str, fps: float, replace: bool = True
     import imageio.v3 as iio
 
     verify = _verify_frames(kind, len(frames) if count is None else count, fps)
+    frames = _drawn(frames)
     if kind == "png":
         with atomic_path(path, directory=True, replace=replace, verify=verify) as tmp:
             for k, frame in enumerate(frames):
-                iio.imwrite(tmp / f"frame_{k:04d}.png", frame)
+                with phase("encoding"):
+                    iio.imwrite(tmp / f"frame_{k:04d}.png", frame)
         return
     with atomic_path(path, replace=replace, verify=verify) as tmp:
         if kind == "mp4":
@@ -209,17 +217,29 @@ def write_frames(frames, path: Path, kind: str, fps: float, replace: bool = True
             )
             writer.send(None)
             try:
-                writer.send(np.ascontiguousarray(first))
-                for frame in frames:
-                    writer.send(np.ascontiguousarray(frame))
+                for frame in itertools.chain([first], frames):
+                    with phase("encoding"):
+                        writer.send(np.ascontiguousarray(frame))
             finally:
                 writer.close()
         elif kind == "gif":  # Pillow directly: imageio's plugin flushes again at garbage collection
             from PIL import Image
 
             first, *rest = (Image.fromarray(frame) for frame in frames)
-            with open(tmp, "wb") as stream:
+            with open(tmp, "wb") as stream, phase("encoding"):
                 first.save(stream, format="GIF", save_all=True, append_images=rest, duration=1000.0 / fps, loop=0)
+
+
+def _drawn(frames):
+    """``frames``, the time each takes to come counted as drawing (facesim.timings): a
+    renderer's frame, with any wait for its simulation."""
+    frames = iter(frames)
+    while True:
+        with phase("drawing"):
+            frame = next(frames, None)
+        if frame is None:
+            return
+        yield frame
 
 
 def write_image(image: np.ndarray, path: Path, replace: bool = True) -> None:

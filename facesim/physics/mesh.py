@@ -9,6 +9,7 @@ computed on first use and cached read-only, in the spirit of trimesh.
 from __future__ import annotations
 
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 
@@ -166,13 +167,16 @@ def mirror_map(vertices: np.ndarray, faces: np.ndarray | None = None) -> np.ndar
 
     Found as the optimal assignment of every vertex to the nearest reflected vertex and
     checked to be an involution; given ``faces``, also checked to send every triangle to a
-    triangle. Raises ValueError when a check fails.
+    triangle. Raises ValueError when a check fails. Kept on disk (facesim.cache), keyed by
+    the vertices, the faces and this file: the head's simulated skin is made symmetric
+    by it in every process, and the assignment, with SciPy's optimisation package it
+    imports, took 0.3 s of a 2.4 s fresh render (2026-12-04).
     """
-    from scipy.optimize import linear_sum_assignment
-    from scipy.spatial.distance import cdist
+    from ..cache import cached_arrays, key
 
-    reflected = vertices * np.array([-1.0, 1.0, 1.0])
-    _, m = linear_sum_assignment(cdist(vertices, reflected))
+    parts = (np.ascontiguousarray(vertices, dtype=np.float64).tobytes(), b"" if faces is None else
+             np.ascontiguousarray(faces, dtype=np.int64).tobytes(), Path(__file__).read_bytes())
+    m = cached_arrays("mirror-map", key(*parts), lambda: {"map": _assignment(vertices)})["map"]
     if not np.array_equal(m[m], np.arange(len(m))):
         raise ValueError("mirror map is not an involution")
     if faces is not None:
@@ -180,6 +184,14 @@ def mirror_map(vertices: np.ndarray, faces: np.ndarray | None = None) -> np.ndar
         if unmatched:
             raise ValueError(f"mirror map sends {unmatched} triangles to non-triangles")
     return m
+
+
+def _assignment(vertices: np.ndarray) -> np.ndarray:
+    """Each vertex's partner in the optimal assignment to the reflected vertices."""
+    from scipy.optimize import linear_sum_assignment
+    from scipy.spatial.distance import cdist
+
+    return linear_sum_assignment(cdist(vertices, vertices * np.array([-1.0, 1.0, 1.0])))[1]
 
 
 def mirror_mismatched_faces(faces: np.ndarray, mapping: np.ndarray) -> np.ndarray:

@@ -268,13 +268,14 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
 
     from .muscle_forces import _muscle_frame
     from .rig_control import control
+    from .twins import for_mesh
 
     rest = control(kernel_arrays, np.zeros(len(muscles.names)))  # O and I where the bones hold them at rest
     origin, insertion = rest.origin, rest.insertion_point
     sphincter = muscles.kind == SPHINCTER
     length = np.where(sphincter, 1.0, np.linalg.norm(insertion - origin, axis=1))  # a sphincter's falloff is in ring radii
     frame = np.empty_like(x)
-    _muscle_frame(kernel_arrays, arrays["rest_position"], frame)
+    for_mesh(_muscle_frame, n)(kernel_arrays, arrays["rest_position"], frame)
     axes = np.zeros((muscles.count, 2))
     for m in np.flatnonzero(sphincter):
         axes[m] = ellipse_axes(frame[muscles.ring[m], :2] - origin[m, :2], f"{muscles.source}: muscle {muscles.names[m]}: ring")
@@ -302,10 +303,11 @@ def muscle_regions(model) -> list[np.ndarray]:
     mesh's vertices."""
     from .muscle_forces import _muscle_frame, _region_of_influence
     from .rig_control import control
+    from .twins import for_mesh
 
     work = workspace(model.arrays)
     rest = control(model.arrays, np.zeros(len(model.muscles.names)))
-    _muscle_frame(model.arrays, model.arrays.rest_position, work.frame)
+    for_mesh(_muscle_frame, model.vertex_count)(model.arrays, model.arrays.rest_position, work.frame)
     regions = []
     for m in range(model.muscle_count):
         count = _region_of_influence(model.arrays, m, rest.origin, rest.insertion_point, work.frame, work)

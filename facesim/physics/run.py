@@ -13,9 +13,8 @@ import time
 import numba
 import numpy as np
 
-from ..config import PARALLEL_FROM
 from ..errors import SimulationError
-from . import layout, rig_control, solver
+from . import layout, rig_control, solver, twins
 from .model import Model
 from .muscle_forces import _muscle_forces
 
@@ -95,7 +94,7 @@ class Progress:
 def compiled_here() -> bool:
     """Whether this process compiled the simulation's kernel rather than loading it from
     Numba's cache (what a slow first run is put down to)."""
-    return sum(solver._simulate.stats.cache_misses.values()) > 0
+    return any(sum(kernel.stats.cache_misses.values()) > 0 for kernel in twins.variants(solver._simulate))
 
 
 def run(
@@ -113,7 +112,8 @@ def run(
     inverted-triangle counts and smallest relative areas per frame: ``out``'s arrays if
     given (``diagnostics``). The kernels' parallel loops run on ``threads`` threads: by
     default every core Numba has for a mesh of at least ``PARALLEL_FROM`` vertices, else
-    one (facesim.config). With ``progress``, ``STREAMED_FRAMES`` frames a call, each
+    the serial twins of the kernels run (facesim.physics.twins); given ``threads``, the
+    parallel kernels run on that many, on any mesh. With ``progress``, ``STREAMED_FRAMES`` frames a call, each
     reported done as soon as it is in ``out``, and the run stops early when cancelled;
     ``out.positions`` may then hold fewer frames than the run, a ring reused in turn as
     the caller releases frames (``Progress``). ``on_frames(positions)`` sees each piece's
@@ -137,8 +137,9 @@ def run(
     scratch = None if model.vertex_order is None else np.empty((min(piece, frames), n, 3))  # the kernels' order
     status, frame, element = layout.OK, -1, -1
     started = time.perf_counter()
+    simulate = twins.for_mesh(solver._simulate, n, threads)
     if threads is None:
-        threads = numba.config.NUMBA_NUM_THREADS if n >= PARALLEL_FROM else 1
+        threads = numba.config.NUMBA_NUM_THREADS if twins.on_threads(n) else 1
     previous = numba.get_num_threads()
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     try:
@@ -150,7 +151,7 @@ def run(
                     break
             first = start % len(out.positions) if ring else start
             rows = out.positions[first:first + stop - start]
-            status, frame, element = solver._simulate(
+            status, frame, element = simulate(
                 model.arrays, table, start, stop, float(dt), int(model.material.substeps), energy_limit,
                 stop_on_inversion, state, control, work, forces, factor,
                 out._replace(positions=rows if scratch is None else scratch[:stop - start]),
@@ -178,18 +179,6 @@ def run(
     return positions, energy, inverted, smallest
 
 
-def concurrent_kernels() -> bool:
-    """Whether two threads may run facesim's parallel kernels at once: the simulation in the
-    background and the renderer's. Numba's OpenMP and TBB layers allow it; its own
-    workqueue, the fallback on a machine without libgomp or TBB, stops the process when a
-    second thread starts a parallel loop, so there the simulation runs first. Known once a
-    parallel kernel has run in the process (building a model runs one)."""
-    try:
-        return numba.threading_layer() in ("omp", "tbb")
-    except ValueError:  # no parallel kernel run yet
-        return False
-
-
 def diagnostics(frames: int, n: int, capacity: int | None = None) -> solver.Diagnostics:
     """Room for a run's output (``run``): positions, kinetic energy, inverted triangles and
     smallest relative area per frame; positions for ``capacity`` frames alone, when
@@ -206,5 +195,5 @@ def muscle_forces(model: Model, positions: np.ndarray, activation: np.ndarray) -
     x = np.ascontiguousarray(model.in_kernel_order(positions), dtype=np.float64)
     forces = layout.forces(model.arrays)
     control = rig_control.control(model.arrays, activation)
-    _muscle_forces(model.arrays, x, control, layout.workspace(model.arrays), forces)
+    twins.for_mesh(_muscle_forces, model.vertex_count)(model.arrays, x, control, layout.workspace(model.arrays), forces)
     return model.in_mesh_order(forces.force)

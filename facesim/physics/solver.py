@@ -64,6 +64,7 @@ from . import (
     rig_control,
     springs,
     tissue,
+    twins,
 )
 from .layout import INVERTED, NOT_FINITE, OK, RUNAWAY
 from .mesh import inverse_permutation
@@ -230,7 +231,7 @@ def rest_preconditioner(model, h: float) -> Factor:
     n, arrays = model.vertex_count, model.arrays
     control = rig_control.control(arrays, np.zeros(len(model.muscles.names)))
     forces = layout.forces(arrays)
-    _forces(arrays, np.array(control.target), control, layout.workspace(arrays), forces)
+    twins.for_mesh(_forces, n)(arrays, np.array(control.target), control, layout.workspace(arrays), forces)
     # the graph of the vertices that A couples: the pairs of each link's nodes, pinned ones left out
     node, free = forces.node, ~arrays.pinned
     first, second = np.repeat(node, 4, axis=1).ravel(), np.tile(node, (1, 4)).ravel()

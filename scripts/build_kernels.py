@@ -1,0 +1,75 @@
+"""Compile facesim's kernels ahead, for the package to ship: `make kernels`.
+
+A new user's first `facesim render` compiled every Numba kernel it ran, about a minute on
+two cores (issue 45). facesim compiles for the CPU's baseline (facesim.config._portable_target),
+so kernels compiled here run on any machine of the same architecture; this script runs
+the commands a new user starts with in fresh processes with an empty cache, the shipped
+kernels turned off, then packs the cache folder they filled into
+``facesim/compiled/kernels.tar.xz`` with ``kernels.json``: the hash of the code, Numba,
+Python, machine and CPU it holds kernels for. facesim unpacks it into its cache on its
+first run when all five match (facesim.config._install_shipped_kernels); any edit to a
+file with kernels changes the hash, and tests/test_compile.py fails until this is run
+again.
+"""
+
+import json
+import os
+import subprocess
+import sys
+import tarfile
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+#: What a new user runs first (the README): happy on the head to MP4 and to one PNG,
+#: and on the Hopper face with the thesis's muscles.
+COMMANDS = [
+    ["render", "expressions/happy.yaml", "-o", "{out}/happy.mp4"],
+    ["render", "expressions/surprise.yaml", "-o", "{out}/surprise.png"],
+    ["render", "expressions/happy.yaml", "--mesh", "meshes/face.obj", "-o", "{out}/hopper.gif", "--size", "64x64"],
+]
+
+
+def _tar_info(info: tarfile.TarInfo) -> tarfile.TarInfo:
+    """The same archive for the same kernels: no owner, no time."""
+    info.uid = info.gid = 0
+    info.uname = info.gname = ""
+    info.mtime = 0
+    return info
+
+
+def main() -> int:
+    with tempfile.TemporaryDirectory() as scratch:
+        scratch = Path(scratch)
+        env = dict(os.environ, NUMBA_CACHE_DIR=str(scratch / "numba"), FACESIM_CACHE=str(scratch / "facesim"),
+                   FACESIM_SHIPPED_KERNELS="0")
+        env.pop("NUMBA_CPU_NAME", None)
+        env.pop("NUMBA_CPU_FEATURES", None)
+        for command in COMMANDS:
+            command = [sys.executable, "-m", "facesim", *(part.format(out=scratch) for part in command)]
+            print(" ".join(command[2:]), flush=True)
+            subprocess.run(command, cwd=ROOT, env=env, check=True)
+        key = subprocess.run([sys.executable, "-c", "import json, facesim.config as c; "
+                              "print(json.dumps(c.shipped_kernels_key()))"],
+                             cwd=ROOT, env=env, check=True, capture_output=True, text=True)
+        key = json.loads(key.stdout)
+        if key["cpu"] != "generic":
+            raise SystemExit(f"the kernels were compiled for {key['cpu']}, not the baseline: unset NUMBA_CPU_NAME")
+        (folder,) = (scratch / "numba").iterdir()
+        target = ROOT / "facesim" / "compiled"
+        target.mkdir(exist_ok=True)
+        partial = target / "kernels.tar.xz.partial"
+        with tarfile.open(partial, "w:xz") as tar:
+            for path in sorted(folder.rglob("*")):
+                if path.is_file():
+                    tar.add(path, arcname=path.relative_to(folder).as_posix(), filter=_tar_info)
+        os.replace(partial, target / "kernels.tar.xz")
+        (target / "kernels.json").write_text(json.dumps(key, indent=1) + "\n")
+        files = sum(1 for path in folder.rglob("*") if path.is_file())
+        print(f"wrote {target / 'kernels.tar.xz'}: {files} files, "
+              f"{(target / 'kernels.tar.xz').stat().st_size / 1e6:.1f} MB, for {key}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
