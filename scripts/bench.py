@@ -335,6 +335,7 @@ def _timed_render(site: Path, home: Path, out: Path, env: dict | None = None) ->
     clean.update(HOME=str(home), XDG_CACHE_HOME=str(home / ".cache"), PYTHONPATH=str(site), **(env or {}))
     command = [sys.executable, "-m", "facesim", "render", str(EXPRESSIONS / "happy.yaml"), "-o", str(out), "--force",
                "--timings"]
+    home.mkdir(exist_ok=True)
     start = time.perf_counter()
     result = subprocess.run(command, cwd=home, env=clean, capture_output=True, text=True, check=True)
     wall = time.perf_counter() - start
@@ -344,16 +345,17 @@ def _timed_render(site: Path, home: Path, out: Path, env: dict | None = None) ->
     return wall, phases
 
 
-def first_run(cold_runs: int, warm_runs: int, compile_run: bool) -> tuple[str, dict]:
+def first_run(cold_runs: int, warm_runs: int, quick: bool) -> tuple[str, dict]:
     """A new user's first `facesim render expressions/happy.yaml`: facesim freshly
     installed from a wheel, a new HOME and XDG_CACHE_HOME each run, no NUMBA_CACHE_DIR
     or FACESIM_CACHE (the kernels that ship compiled count); then the same run again
     with the caches that first run filled; and, once, the first run without the shipped
     kernels (what another architecture or Python pays). Medians; phases from
-    ``--timings`` (they overlap: the simulation runs beside the drawing)."""
+    ``--timings`` (they overlap: the simulation runs beside the drawing). ``quick``
+    (the smoke test): the checkout's facesim, and no compiling run."""
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
-        site = _installed_facesim(scratch)
+        site = ROOT if quick else _installed_facesim(scratch)  # the smoke test: the checkout, no wheel built
         rows, figures = [], {}
 
         def measured(label, runs, homes, env=None):
@@ -369,7 +371,7 @@ def first_run(cold_runs: int, warm_runs: int, compile_run: bool) -> tuple[str, d
         cold = [scratch / f"home-{k}" for k in range(cold_runs)]
         measured("first run, new user (shipped kernels)", cold_runs, cold)
         measured("later runs, caches warm", warm_runs, [cold[-1]] * warm_runs)
-        if compile_run:
+        if not quick:
             measured("first run without the shipped kernels (compiling)", 1, [scratch / "home-compiling"],
                      {"FACESIM_SHIPPED_KERNELS": "0"})
     return table(["`facesim render expressions/happy.yaml`", "median wall (s)", "runs (s)", "phases (s, medians)"],
@@ -1181,7 +1183,7 @@ def main() -> int:
     section("Compilation, measured apart", text + "\n\nEach row is one fresh process; `cache=True` keeps compiled "
             "kernels on disk, so only the first run of this code on a machine pays for compilation, whichever copy "
             "of facesim runs it (facesim.config).")
-    text, first = first_run(1 if quick else 3, 2 if quick else 7, not quick)
+    text, first = first_run(1 if quick else 3, 2 if quick else 7, quick)
     section("First run: a new user's first render, and the ones after", text + "\n\nfacesim built into a wheel "
             "and installed on its own (`pip install --target`), its dependencies this environment's; each first run "
             "in a new HOME and XDG_CACHE_HOME, with no NUMBA_CACHE_DIR or FACESIM_CACHE; the later runs in the last "

@@ -28,7 +28,7 @@ def test_bench_quick_prints_every_table_with_sensible_figures(tmp_path):
     assert result.returncode == 0, result.stderr[-3000:]
     for title in ("Table 3.1", "Table 3.2", "Table 3.3", "Numba against the NumPy reference", "two solvers",
                   "Compilation", "fresh process", "Scaling", "Vertex order", "Rendering", "overlapped", "default head",
-                  "Memory: a long clip", "Targets"):
+                  "Memory: a long clip", "First run", "Targets"):
         assert title in result.stdout
     assert "happy" in result.stdout and "disgusted anger" in result.stdout
     f = json.loads(figures_path.read_text())
@@ -47,6 +47,12 @@ def test_bench_quick_prints_every_table_with_sensible_figures(tmp_path):
     assert f["solvers"]["the default head"]["implicit"] > 0 and f["solvers"]["the default head"]["no_bending"] > 0
     assert max(f["solvers"]["apex, the default head"].values()) < 0.02
     assert 0 < f["fresh_wall"] < 60 and 50 < f["fresh_peak_mb"] < 4000
+    # a new user's first render (a new HOME) and a later one, each with its phases: the first
+    # compiled nothing (the kernels ship compiled), so it reports no "kernels" phase
+    first, later = f["first_run"]["first run, new user (shipped kernels)"], f["first_run"]["later runs, caches warm"]
+    for run in (first, later):
+        assert 0 < run["wall"] < 120 and {"imports", "model", "GL context", "drawing", "encoding"} <= set(run["phases"])
+    assert "kernels" not in first["phases"]
     assert len(f["vertex_order"]) == 4 and all(v > 0 for v in f["vertex_order"].values())
     run = f["overlap"]  # both ways wrote the frames, and drawing them took longer than simulating them
     assert run["frames"] == 35 and run["after"] > run["sim"] > 0 and run["overlapped"] > 0
