@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 import yaml
-from conftest import EXPRESSIONS
+from conftest import EXPRESSIONS, spec
 
 import facesim
 from facesim.animation.spec import POSE, activation_table, load_spec, pose_table
@@ -231,3 +231,45 @@ def test_a_tied_rim_gives_between_a_pinned_and_a_free_one(tmp_path, mesh):
         raised[boundary] = float(held.displacement[forehead, 1].mean())
     assert raised["outer"] == 0.0
     assert 0.05 < raised["tied"] < raised["none"]
+
+
+def one_sided(aus: dict, frames: int = 40):
+    """The head under action units eased in over 10 frames and held: the last frame."""
+    s = spec("happy").model_copy(update=dict(aus=aus, activations={}, frames=frames, onset=10))
+    animation = facesim.simulate(s)
+    assert animation.inverted.max() == 0
+    return animation.positions[-1]
+
+
+def test_a_wink_closes_one_eye_and_leaves_the_other(model):
+    """AU46_L, FACS's wink on the subject's left: that eye's lids meet (gap under 0.5
+    mm at the lid's middle), the other eye's stay within 0.5 mm of rest; the eye closed
+    is the one ``eyelid_l`` closes, on the side of the ``_l`` muscles."""
+    winked = one_sided({"AU46_L": 1.0})
+    gaps = [opening(winked, upper, lower) for upper, lower in LIDS]
+    rests = [opening(model.rest_position, upper, lower) for upper, lower in LIDS]
+    closed = int(np.argmin(gaps))
+    assert gaps[closed] < 0.05 and abs(gaps[1 - closed] - rests[1 - closed]) < 0.05
+    upper, lower = LIDS[closed]
+    left = model.muscles.names.index("zygomaticus_major_l")
+    assert np.sign(model.rest_position[upper, 0]) == np.sign(model.rest_position[model.muscles.insertion[left], 0])
+    with pytest.raises(InputError, match="AU46 .wink. acts on one side: give AU46_L or AU46_R"):
+        activation_table(spec("happy").model_copy(update=dict(aus={"AU46": 1.0})), model.muscles)
+
+
+def test_a_one_sided_smile_lifts_one_lip_corner_as_the_smile_does_and_leaves_the_other(model, mesh):
+    """AU12_R (a smirk): the subject's right lip corner goes where AU12 takes it, within
+    1 mm, and the left one stays within 1 mm of rest; AU12_L is its mirror image; a
+    unit of midline muscles alone (AU23's lip ring) has no one-sided form."""
+    both, right, left = one_sided({"AU12": 1.0}), one_sided({"AU12_R": 1.0}), one_sided({"AU12_L": 1.0})
+    rest = model.rest_position
+    corners = {np.sign(rest[c, 0]): c for c in (61, 291)}  # the mouth's corners, one each side
+    insertion = model.muscles.insertion[model.muscles.names.index("zygomaticus_major_r")]
+    near, far = corners[np.sign(rest[insertion, 0])], corners[-np.sign(rest[insertion, 0])]
+    assert np.linalg.norm(both[near] - rest[near]) > 0.3  # the smile lifts the corner by millimetres
+    assert np.linalg.norm(right[near] - both[near]) < 0.1
+    assert np.linalg.norm(right[far] - rest[far]) < 0.1
+    mirror = mirror_map(mesh.vertices, mesh.faces)
+    assert np.abs((right - rest)[mirror] * np.array([-1.0, 1.0, 1.0]) - (left - rest)).max() < 1e-3
+    with pytest.raises(InputError, match="AU23_L: AU23 .lip tightener. moves both sides at once"):
+        activation_table(spec("happy").model_copy(update=dict(aus={"AU23_L": 1.0})), model.muscles)

@@ -26,7 +26,6 @@ the muscle file and turns the spec into a (frames, muscles) table once, before s
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -40,6 +39,7 @@ from ..face.material import MaterialSpec
 from ..physics.muscles import MuscleSet
 from ..schema import Strict, load_model
 from .timeline import (
+    AU_NAME,
     INTERPOLATIONS,
     MPEG4_FAPS,
     apply_cooccurrence,
@@ -194,8 +194,8 @@ class Spec(Strict):
     def _facs(cls, aus):
         out = {}
         for au, value in aus.items():
-            if not re.fullmatch(r"AU\d+", au):
-                raise ValueError(f"{au!r} is not an action unit name such as AU12")
+            if not AU_NAME.fullmatch(au):
+                raise ValueError(f"{au!r} is not an action unit name such as AU12 or AU12_L")
             out[au] = parse_intensity(value)
         return out
 
@@ -395,7 +395,7 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
     for k, track in enumerate(spec.timeline):
         curve = track.values(spec.dt, frames)
         where = f"timeline -> {k} -> target"
-        if re.fullmatch(r"AU\d+", track.target):
+        if AU_NAME.fullmatch(track.target):
             au_curves[track.target] = au_curves.get(track.target, 0) + curve
         elif track.target in names or track.target in MPEG4_FAPS:
             table += np.outer(curve, muscle_vector(track.target, where))

@@ -21,6 +21,8 @@ holds the end values. The outer control points are the end keys reflected
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 INTERPOLATIONS = ("linear", "cosine", "bspline", "cardinal", "hold")
@@ -71,7 +73,8 @@ def envelope_keys(start: float, onset: float, apex: float, offset: float, intens
 # --- FACS action units ----------------------------------------------------------------
 
 #: Action unit -> (name, muscles and how much of each). Muscles are given without side;
-#: an AU drives both sides. The jaw and the eyelids (facesim.physics.rig) count as muscles here:
+#: an AU drives both sides, and its one-sided form (FACS's L and R: ``AU12_L``, the
+#: subject's left) the muscles of that side alone (``au_muscles``). The jaw and the eyelids (facesim.physics.rig) count as muscles here:
 #: AU26 opens the jaw half way (half its max_angle), AU27 fully. AUs whose muscles the
 #: face does not have are errors.
 ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
@@ -110,6 +113,7 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     "AU27": ("mouth stretch", {"jaw": 1.0}),
     "AU43": ("eyes closed", {"eyelid": 1.0}),
     "AU45": ("blink", {"eyelid": 1.0}),
+    "AU46": ("wink", {"eyelid": 1.0}),
 }
 #: MPEG-4 facial animation parameters that name a control of this face (FAPs 3 and
 #: 19-22), usable wherever a muscle name is, with values in [0, 1] of the control's range
@@ -141,27 +145,51 @@ def parse_intensity(value) -> float:
     return value
 
 
+#: An action unit's name: FACS's number, and L or R for its one-sided form (``AU12_L``).
+AU_NAME = re.compile(r"AU(\d+)(?:_([LR]))?")
+#: Units FACS scores on one side only: a wink.
+ONE_SIDED = {"AU46"}
+
+
 def apply_cooccurrence(intensity: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Domination and opposition rules on per-frame AU intensities."""
+    """Domination and opposition rules on per-frame AU intensities, between the units of
+    both sides and between those of one side (AU15_L dominates AU12_L)."""
     out = dict(intensity)
-    for dominant, dominated in DOMINATION:
-        if dominant in out and dominated in out:
-            out[dominated] = out[dominated] * (1 - out[dominant])
-    for a, b in OPPOSITION:
-        if a in out and b in out:
-            out[a], out[b] = np.maximum(out[a] - out[b], 0), np.maximum(out[b] - out[a], 0)
+    for side in ("", "_L", "_R"):
+        for dominant, dominated in DOMINATION:
+            dominant, dominated = dominant + side, dominated + side
+            if dominant in out and dominated in out:
+                out[dominated] = out[dominated] * (1 - out[dominant])
+        for a, b in OPPOSITION:
+            a, b = a + side, b + side
+            if a in out and b in out:
+                out[a], out[b] = np.maximum(out[a] - out[b], 0), np.maximum(out[b] - out[a], 0)
     return out
 
 
 def au_muscles(au: str, muscle_names: tuple[str, ...]) -> dict[str, float]:
-    """The muscles (with sides) an AU drives on this face; an error naming what is missing."""
-    if au not in ACTION_UNITS:
-        raise ValueError(f"unknown action unit {au!r} (known: {', '.join(ACTION_UNITS)})")
-    name, muscles = ACTION_UNITS[au]
+    """The muscles (with sides) an AU drives on this face; an error naming what is missing.
+    A one-sided unit (``AU12_L``) drives its muscles of that side (``_l``: the subject's
+    left); a midline muscle (the procerus, the frontalis over the galea), which lies
+    across both sides, at half its weight; a unit of midline muscles or the jaw alone
+    (AU23's lip ring, AU26's jaw) has no one-sided form."""
+    match = AU_NAME.fullmatch(au)
+    if match is None or f"AU{match[1]}" not in ACTION_UNITS:
+        raise ValueError(f"unknown action unit {au!r} (known: {', '.join(ACTION_UNITS)}, each also with _L or _R)")
+    unit, side = f"AU{match[1]}", match[2]
+    name, muscles = ACTION_UNITS[unit]
+    if side is None and unit in ONE_SIDED:
+        raise ValueError(f"{unit} ({name}) acts on one side: give {unit}_L or {unit}_R")
     out = {}
     for muscle, weight in muscles.items():
         found = [n for n in muscle_names if n == muscle or n in (f"{muscle}_l", f"{muscle}_r")]
         if not found:
             raise ValueError(f"{au} ({name}) needs the {muscle.replace('_', ' ')}, which this face's muscle file does not have")
+        if side is not None:
+            found = [n for n in found if n == muscle or n.endswith(f"_{side.lower()}")]
+            weight = weight / 2 if found == [muscle] else weight
         out.update({n: weight for n in found})
+    if side is not None and all(n in muscles for n in out):
+        raise ValueError(f"{au}: {unit} ({name}) moves both sides at once ({', '.join(n.replace('_', ' ') for n in out)}); "
+                         f"it has no one-sided form")
     return out
