@@ -41,7 +41,7 @@ from conftest import spec
 from facesim.animation.calibration import hold
 from facesim.animation.simulate import model_for
 from facesim.animation.spec import Spec, activation_table
-from facesim.animation.timeline import ACTION_UNITS
+from facesim.animation.timeline import ACTION_UNITS, ONE_SIDED
 from facesim.config import LIBRARY
 from facesim.physics.run import run
 
@@ -52,7 +52,9 @@ SETTLED = 1e-6
 STILL = 1e-6
 #: Units driving the same control at once (the jaw's two openings, the lid's two
 #: closings) are not a pair a face makes.
-SAME_CONTROL = [{"AU26", "AU27"}, {"AU43", "AU45"}]
+SAME_CONTROL = [{"AU26", "AU27"}, {"AU43", "AU45"}, {"AU43", "AU46_L"}, {"AU45", "AU46_L"}]
+#: Every unit, a unit FACS scores on one side only (the wink) on the subject's left.
+UNITS = [f"{au}_L" if au in ONE_SIDED else au for au in ACTION_UNITS]
 #: A pair not at rest after HELD frames must be the bounded flutter the module docstring
 #: names: held twice as long, its kinetic energy's peak over the last 100 frames at most
 #: FLUTTER_GROWTH times that over the 100 before HELD, at most FLUTTER_ENERGY of its peak,
@@ -76,12 +78,12 @@ def unsettled(held) -> bool:
 
 @pytest.fixture(scope="module")
 def alone(head_model):
-    return {au: hold(head_model, au, frames=HELD) for au in ACTION_UNITS}
+    return {au: hold(head_model, au, frames=HELD) for au in UNITS}
 
 
 @pytest.fixture(scope="module")
 def pairs(head_model):
-    chosen = [p for p in itertools.combinations(ACTION_UNITS, 2) if set(p) not in SAME_CONTROL]
+    chosen = [p for p in itertools.combinations(UNITS, 2) if set(p) not in SAME_CONTROL]
     assert len(chosen) > 150
     return {"+".join(p): hold(head_model, p, frames=HELD) for p in chosen}
 
