@@ -198,8 +198,10 @@ def rig_targets(model, activation):
     """Where the jaw and eyelids take each vertex (facesim.physics.rig): the lid closure c and the
     levator's raise a slide a vertex in cylindrical coordinates (x, φ, r) about its eye's
     horizontal axis by c Δ_close + a (1 - c) Δ_raise; then the jaw turns it by its weight w times θ = activation × max
-    angle about the hinge axis. And the drive holding the lips and lid contours:
-    drive × weight × min(1, 10 a) for the activation a of their control."""
+    angle about the hinge axis and carries it by w times its glide (the glide columns'
+    activations times their glides). And the drive holding the lips and lid contours:
+    drive × weight × min(1, 10 a) for the activation a of their control (the jaw's: its
+    largest of opening and glides)."""
     from scipy.spatial.transform import Rotation
 
     rig, p = model.rig, model.rest_position.copy()
@@ -214,8 +216,11 @@ def rig_targets(model, activation):
     if rig.jaw_column >= 0:
         angle = rig.jaw_weight * rig.jaw_max * activation[rig.jaw_column]
         p = rig.jaw_hinge + Rotation.from_rotvec(angle[:, None] * rig.jaw_axis).apply(p - rig.jaw_hinge)
+        p = p + rig.jaw_weight[:, None] * (activation[rig.jaw_glide_column] @ rig.jaw_glide)
     driven = rig.drive_column >= 0
     a = np.maximum(activation[np.maximum(rig.drive_column, 0)], a)
+    if rig.jaw_column >= 0:
+        a = np.where(rig.drive_column == rig.jaw_column, np.maximum(a, activation[rig.jaw_glide_column].max()), a)
     hold = np.where(driven, model.material.drive * rig.drive_weight * np.minimum(1.0, 10.0 * a), 0.0)
     return p, hold
 

@@ -63,7 +63,7 @@ def test_thesis_expressions_simulate_on_the_head(name):
 def test_jaw_turns_the_lower_teeth_and_keeps_the_upper(head):
     animation = simulate(head_spec("happy", activations={"jaw": 1.0}, aus={}, include=[], onset=15))
     figure = figure_for(animation.model)
-    angle = animation.jaw_at(animation.frames - 1)
+    angle = animation.jaw_at(animation.frames - 1)[0]
     assert angle == pytest.approx(np.radians(20))
     opened = figure.positions(animation.positions[-1], angle)
     closed = figure.positions(animation.model.rest_position, 0.0)
@@ -253,7 +253,7 @@ def _teeth_pixels(animation, frame: int) -> int:
 
 def test_teeth_show_in_the_rendered_mouth_when_the_jaw_opens():
     opened = simulate(spec("happy", activations={"jaw": 1.0}, onset=15))
-    assert opened.jaw_at(opened.frames - 1) == pytest.approx(np.radians(20))
+    assert opened.jaw_at(opened.frames - 1)[0] == pytest.approx(np.radians(20))
     shown = _teeth_pixels(opened, opened.frames - 1)
     assert shown > 300  # about 460 of the 512² frame (the face framed)
     assert _teeth_pixels(opened, 0) < 0.2 * shown  # closed lips hide them but for a line at their seam (73 pixels)

@@ -119,17 +119,19 @@ class Animation:
     def pose_at(self, frame: int) -> np.ndarray | None:
         return None if self.pose is None else self.pose[frame]
 
-    def jaw_at(self, frame: int) -> float:
-        """The jaw's angle (radians) at a frame: its activation times its largest angle."""
-        return float(self.jaw[frame])
+    def jaw_at(self, frame: int) -> np.ndarray:
+        """The jaw at a frame: (4,) its angle (radians) and its glide (cm), as ``jaw``."""
+        return self.jaw[frame]
 
     @property
     def jaw(self) -> np.ndarray:
-        """(frames,) the jaw's angle (radians): its activation times its largest angle."""
+        """(frames, 4) the jaw's angle (radians: its activation times its largest angle) and
+        its glide (cm, (3,): the glide controls' activations times their glides)."""
         rig = None if self.model is None else self.model.rig
         if rig is None or rig.jaw_column < 0:
-            return np.zeros(self.frames)
-        return self.activations[:, rig.jaw_column] * rig.jaw_max
+            return np.zeros((self.frames, 4))
+        return np.column_stack([self.activations[:, rig.jaw_column] * rig.jaw_max,
+                                self.activations[:, rig.jaw_glide_column] @ rig.jaw_glide])
 
     @property
     def figure(self):

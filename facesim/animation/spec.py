@@ -7,9 +7,10 @@ time step. A spec is a YAML file validated by pydantic (unknown fields are error
     onset: 10                   # frames over which activations ease in (Parke's cosine)
     activations:                # muscle: activation in [0, 1]
       zygomaticus_major_l: 1.0
-    aus: {AU12: D}              # FACS action units (facesim.animation.timeline)
+    aus: {AU12: D}              # FACS action units (facesim.animation.timeline), AU12_L one side
+    arkit: {mouthSmileLeft: 0.7}   # ARKit's 52 blendshapes, ICT's spellings too (facesim.animation.arkit)
     expressions: {joy: 0.5}     # MPEG-4 expressions by name
-    timeline: [...]             # key-framed tracks of muscles, AUs, expressions, jaw, eyelids
+    timeline: [...]             # key-framed tracks of muscles, AUs, ARKit shapes, expressions, jaw, eyelids
     pose: [...]                 # key-framed head yaw/pitch/roll and gaze yaw/pitch (degrees)
     include: [{spec: happy, weight: 0.6}]   # blends of other specs
     sequence: [...]             # expressions one after another
@@ -38,6 +39,7 @@ from ..face.head import IDENTITY_MODES, identity_problem
 from ..face.material import MaterialSpec
 from ..physics.muscles import MuscleSet
 from ..schema import Strict, load_model
+from .arkit import is_shape_name, shape_facs
 from .timeline import (
     AU_NAME,
     INTERPOLATIONS,
@@ -162,6 +164,7 @@ class Spec(Strict):
     fps: float = Field(25.0, gt=0, le=240, description="playback rate of the rendered video")
     activations: dict[str, Activation] = Field(default_factory=dict)
     aus: dict[str, float | str] = Field(default_factory=dict, description="FACS action units: A-E or 0-1")
+    arkit: dict[str, Activation] = Field(default_factory=dict, description="ARKit's blendshapes (ICT's spellings too): 0-1")
     expressions: dict[str, Activation] = Field(default_factory=dict, description="MPEG-4 expressions by name")
     timeline: list[Track] = Field(default_factory=list)
     pose: list[PoseTrack] = Field(default_factory=list, description="head and gaze angles over time")
@@ -198,6 +201,13 @@ class Spec(Strict):
                 raise ValueError(f"{au!r} is not an action unit name such as AU12 or AU12_L")
             out[au] = parse_intensity(value)
         return out
+
+    @field_validator("arkit")
+    @classmethod
+    def _shapes(cls, arkit):
+        for name in arkit:
+            shape_facs(name)  # a ValueError names an unknown shape, or one not simulated yet
+        return arkit
 
     @field_validator("expressions")
     @classmethod
@@ -346,6 +356,9 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
       intensity, eased in the same way;
     - ``aus``: FACS action units through their muscles, eased in the same way, together
       with the action-unit tracks after the co-occurrence rules;
+    - ``arkit``: ARKit's (and ICT's) shapes through the FACS form each stands for
+      (facesim.animation.arkit), eased in the same way, with their tracks, as weights: no
+      co-occurrence rules;
     - ``timeline``: key-framed curves of muscles, action units and expressions;
     - ``include``: other specs' tables (at this spec's frames and Δt) times their weights;
     - ``sequence``: expressions one after another, each reached over its transition.
@@ -392,17 +405,26 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
         table += np.outer(ease * intensity, expression_vector(name))
 
     au_curves = {au: ease * value for au, value in spec.aus.items()}
+    shape_curves = {name: ease * value for name, value in spec.arkit.items()}
     for k, track in enumerate(spec.timeline):
         curve = track.values(spec.dt, frames)
         where = f"timeline -> {k} -> target"
         if AU_NAME.fullmatch(track.target):
             au_curves[track.target] = au_curves.get(track.target, 0) + curve
+        elif is_shape_name(track.target):
+            try:
+                shape_facs(track.target)
+            except ValueError as exc:
+                fail(where, str(exc))
+            shape_curves[track.target] = shape_curves.get(track.target, 0) + curve
         elif track.target in names or track.target in MPEG4_FAPS:
             table += np.outer(curve, muscle_vector(track.target, where))
         else:
             table += np.outer(curve, expression_vector(track.target))
     for au, curve in apply_cooccurrence({a: np.clip(c, 0, 1) for a, c in au_curves.items()}).items():
         table += np.outer(curve, au_vector(au, f"aus -> {au}"))
+    for name, curve in shape_curves.items():
+        table += np.outer(np.clip(curve, 0, 1), au_vector(shape_facs(name), f"arkit -> {name}"))
 
     for k, include in enumerate(spec.include):
         path = spec.resolve(include.spec)

@@ -111,14 +111,18 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     "AU24": ("lip pressor", {"mentalis": 0.42, "orbicularis_oris": 0.29, "incisivus_labii_inferioris": 0.34}),
     "AU26": ("jaw drop", {"jaw": 0.5}),
     "AU27": ("mouth stretch", {"jaw": 1.0}),
+    # the condyles glide along the articular eminence (facesim.physics.rig): forward, and
+    # to one side (FACS scores AU30 with L or R: the side the jaw moves to)
+    "AU29": ("jaw thrust", {"jaw_thrust": 1.0}),
+    "AU30": ("jaw sideways", {"jaw_sideways": 1.0}),
     "AU43": ("eyes closed", {"eyelid": 1.0}),
     "AU45": ("blink", {"eyelid": 1.0}),
     "AU46": ("wink", {"eyelid": 1.0}),
 }
-#: MPEG-4 facial animation parameters that name a control of this face (FAPs 3 and
+#: MPEG-4 facial animation parameters that name a control of this face (FAPs 3, 14 and
 #: 19-22), usable wherever a muscle name is, with values in [0, 1] of the control's range
 #: rather than in FAP units. MPEG-4's left is the subject's left, as ``_l`` is here.
-MPEG4_FAPS = {"open_jaw": "jaw", "close_t_l_eyelid": "eyelid_l", "close_b_l_eyelid": "eyelid_l",
+MPEG4_FAPS = {"open_jaw": "jaw", "thrust_jaw": "jaw_thrust", "close_t_l_eyelid": "eyelid_l", "close_b_l_eyelid": "eyelid_l",
               "close_t_r_eyelid": "eyelid_r", "close_b_r_eyelid": "eyelid_r"}
 #: FACS intensity letters, trace (A) to maximum (E).
 FACS_LETTERS = {"A": 0.2, "B": 0.4, "C": 0.6, "D": 0.8, "E": 1.0}
@@ -147,8 +151,8 @@ def parse_intensity(value) -> float:
 
 #: An action unit's name: FACS's number, and L or R for its one-sided form (``AU12_L``).
 AU_NAME = re.compile(r"AU(\d+)(?:_([LR]))?")
-#: Units FACS scores on one side only: a wink.
-ONE_SIDED = {"AU46"}
+#: Units FACS scores on one side only: a wink, the jaw moved to one side.
+ONE_SIDED = {"AU46", "AU30"}
 
 
 def apply_cooccurrence(intensity: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

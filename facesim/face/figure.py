@@ -2,13 +2,13 @@
 
 A :class:`Figure` holds every vertex of the scene at rest, a colour per vertex and the
 parts (skin, teeth, eyes, ...) with their triangles and material. Per frame,
-:meth:`Figure.positions` turns the simulated skin (n vertices) and the jaw's angle into
+:meth:`Figure.positions` turns the simulated skin (n vertices) and the jaw's pose into
 the figure's vertices, in four linear steps:
 
 1. ``follow``: vertices that ride the skin take a fixed linear combination of the
    simulation's displacements (for a bare mask, its own vertices one for one);
 2. ``jaw``: vertices on the mandible (lower teeth, tongue, the floor of the mouth) turn
-   with it about the hinge, by their weight;
+   with it about the hinge and glide with its condyles, by their weight;
 3. ``eyes``: each eyeball turns about its centre for the gaze;
 4. the skin around each eye is kept outside its eyeball (a contact, as the lids slide).
 
@@ -99,9 +99,12 @@ class Figure:
     def triangles(self) -> np.ndarray:
         return np.concatenate([p.triangles for p in self.parts])
 
-    def positions(self, sim: np.ndarray, jaw_angle: float = 0.0, gaze: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
-        """(N, 3): the figure for simulated positions ``sim`` (n, 3), the jaw's angle
-        (radians) and the gaze (yaw, pitch in degrees)."""
+    def positions(self, sim: np.ndarray, jaw=0.0, gaze: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+        """(N, 3): the figure for simulated positions ``sim`` (n, 3), the jaw (its angle
+        in radians, or (4,): the angle and its glide in cm, as Animation.jaw) and the gaze
+        (yaw, pitch in degrees)."""
+        jaw = np.atleast_1d(np.asarray(jaw, dtype=np.float64))
+        jaw_angle, glide = jaw[0], jaw[1:4]
         x = np.empty_like(self.rest)
         follow = self.follow
         _followed(self.rest, self.follow_rows, follow.indptr, follow.indices, follow.data, self.follow_gain,
@@ -110,6 +113,8 @@ class Figure:
             rest = self.rest[self.jaw_rows] - self.jaw_hinge
             turned = rest @ axis_rotation(self.jaw_axis, jaw_angle).T
             x[self.jaw_rows] += self.jaw_weight[:, None] * (turned - rest)
+        if glide.any() and len(self.jaw_rows):
+            x[self.jaw_rows] += self.jaw_weight[:, None] * glide
         if any(gaze):
             turn = rotation(*gaze)
             for rows, centre in self.eyes:

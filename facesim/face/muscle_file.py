@@ -25,7 +25,7 @@ from pydantic import Field, StrictInt, field_validator, model_validator
 from ..config import MIDLINE_FRACTION, SNAP_FRACTION
 from ..errors import InputError
 from ..physics.mesh import FaceMesh
-from ..physics.muscles import LINEAR, SPHINCTER, EyelidRig, JawRig, MuscleSet
+from ..physics.muscles import JAW_CONTROLS, LINEAR, SPHINCTER, EyelidRig, JawRig, MuscleSet
 from ..schema import Strict, load_model
 
 #: A landmark: a vertex index (an integer: YAML's ``true`` is not vertex 1) or a 3D point.
@@ -95,7 +95,10 @@ class _Contours(Strict):
 
 class Jaw(_Contours):
     """The mandible: a rotation about the hinge axis through two points (the
-    temporomandibular joints), ``max_angle`` degrees at activation 1. ``lower`` points
+    temporomandibular joints), ``max_angle`` degrees at activation 1, and a glide of its
+    condyles along the articular eminence: forward by ``protrusion`` cm (FACS AU29, jaw
+    thrust, driven by the control ``jaw_thrust``) and sideways by ``excursion`` cm (AU30,
+    ``jaw_sideways_l`` toward the subject's left, ``jaw_sideways_r`` the right). ``lower`` points
     follow it fully, ``upper`` points stay with the skull; the rest of the face follows
     with a weight interpolated smoothly between them (facesim.physics.rig). The two lists pair
     up, upper over lower: the lips' contacts, which meet across a plane turned
@@ -104,6 +107,10 @@ class Jaw(_Contours):
 
     hinge: tuple[Point, Point]
     max_angle: float = Field(20.0, gt=0, le=45)
+    # a grown mandible protrudes 7-10 mm and moves 8-12 mm to either side (clinical
+    # norms); ICT's jawForward carries the lower incisors 9 mm, its jawLeft 7.4 mm
+    protrusion: float = Field(0.9, ge=0, le=2, description="cm the jaw glides forward at jaw_thrust 1 (AU29)")
+    excursion: float = Field(0.75, ge=0, le=2, description="cm the jaw glides sideways at jaw_sideways_l/_r 1 (AU30)")
     contact_tilt: float = Field(0.0, ge=0, lt=90, description="degrees the plane the closed lips meet across "
                                 "turns from the horizontal, its front edge up (0: the upper lip only ever above the "
                                 "lower); 50 matches ICT's chin raiser and lip press on the default head (REALISM.md)")
@@ -169,7 +176,7 @@ class MuscleFile(Strict):
 
     @model_validator(mode="after")
     def _unique_names(self):
-        seen = {"jaw"} if self.jaw else set()
+        seen = set(JAW_CONTROLS) if self.jaw else set()
         levators = [e.levator for e in self.eyelids if e.levator]
         for name in [m.name for m in self.muscles] + [e.name for e in self.eyelids] + levators:
             if name in seen:
@@ -284,8 +291,9 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         upper = np.array([_snap(p, mesh, f"{where}: upper") for p in spec.jaw.upper], dtype=np.int64)
         lower = np.array([_snap(p, mesh, f"{where}: lower", below=u) for p, u in zip(spec.jaw.lower, upper)], dtype=np.int64)
         _upper_over_lower(mesh, upper, lower, where)
-        jaw = JawRig(hinge, lower, upper, float(np.radians(spec.jaw.max_angle)), float(np.radians(spec.jaw.contact_tilt)))
-        controls.append("jaw")
+        jaw = JawRig(hinge, lower, upper, float(np.radians(spec.jaw.max_angle)), float(np.radians(spec.jaw.contact_tilt)),
+                     spec.jaw.protrusion, spec.jaw.excursion)
+        controls += JAW_CONTROLS
     eyelids = []
     for lid in spec.eyelids:
         where = f"{source}: eyelid {lid.name}"

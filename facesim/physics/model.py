@@ -334,7 +334,7 @@ PER_HINGE = ("hinge", "hinge_weight")
 PER_VERTEX_ROWS = ("neighbour_start", "neighbour_index", "ring_start", "ring_a", "ring_b")
 UNCHANGED = ("muscle_kind", "muscle_axes", "muscle_centre_start", "muscle_cos_zone", "muscle_r", "muscle_r_max",
              "muscle_force", "muscle_protrusion", "axis_x", "axis_z", "radius", "jaw_column", "jaw_hinge", "jaw_axis",
-             "jaw_max", "contact_normal", "contact_gap", "mass", "damping", "stiffness",
+             "jaw_max", "jaw_glide_column", "jaw_glide", "contact_normal", "contact_gap", "mass", "damping", "stiffness",
              "nonlinearity", "repulsion_nonlinearity", "length_unit", "tissue", "drive", "bending", "edge_repulsion",
              "uv_projection", "attached_regions", "implicit", "iterations", "tolerance")
 
@@ -394,13 +394,15 @@ def bending_hinges(x: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.nda
     triangle holding xk and c1k at x1 (clamped to ``COTANGENT_LIMIT``). Applied to the
     positions it is -√(3 / (A0 + A1)) |e| (n0 + n1), n0 and n1 the unit normals to the edge in
     their planes: zero on a flat hinge, whatever affine map moves it. Triangle pairs from
-    trimesh's face adjacency (the mesh kept unprocessed: its vertex order is facesim's)."""
-    import trimesh
-
-    mesh = trimesh.Trimesh(x, faces, process=False)
-    edge = mesh.face_adjacency_edges
-    opposite = mesh.face_adjacency_unshared
-    hinge = np.column_stack([edge, opposite]).astype(np.int64)
+    edges each two triangles share, found by sorting the triangles' edges (in facesim's
+    vertex order)."""
+    corners = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    opposite = faces[:, [2, 0, 1]].ravel()  # each edge's third corner
+    edge = np.sort(corners, axis=1)
+    order = np.lexsort((edge[:, 1], edge[:, 0]))
+    shared = np.flatnonzero(np.all(edge[order[1:]] == edge[order[:-1]], axis=1))
+    first, second = order[shared], order[shared + 1]
+    hinge = np.column_stack([edge[first], opposite[first], opposite[second]]).astype(np.int64)
     p = x[hinge]  # (e, 4, 3)
 
     def cotangent(at, a, b):

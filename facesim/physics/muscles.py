@@ -30,13 +30,22 @@ LINEAR, SPHINCTER = 0, 1
 @dataclass(frozen=True)
 class JawRig:
     """The jaw resolved onto a mesh: hinge (2, 3) points in cm, lower/upper vertex indices,
-    max_angle and the lips' contact_tilt in radians."""
+    max_angle and the lips' contact_tilt in radians, and how far (cm) its condyles glide
+    forward (protrusion) and sideways (excursion) at activation 1."""
 
     hinge: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
     max_angle: float
     contact_tilt: float = 0.0
+    protrusion: float = 0.0
+    excursion: float = 0.0
+
+
+#: The jaw's controls, activation columns after the muscles: its opening about the hinge
+#: (MPEG-4 open_jaw, AU26/27), its glide forward (thrust_jaw, AU29) and to either side
+#: (AU30 left and right: one column each, as activations are 0-1).
+JAW_CONTROLS = ("jaw", "jaw_thrust", "jaw_sideways_l", "jaw_sideways_r")
 
 
 @dataclass(frozen=True)

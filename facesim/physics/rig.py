@@ -10,7 +10,12 @@ lids close, and everything else follows through the springs, with the muscles st
 acting on top.
 
 - **Jaw** (MPEG-4 ``open_jaw``, FACS AU26/AU27): a rotation by ``w θ`` about the hinge
-  axis through the two temporomandibular points, θ = activation × ``max_angle``. The weight
+  axis through the two temporomandibular points, θ = activation × ``max_angle``, then a
+  translation by ``w g``: the condyles glide along the articular eminence, forward (AU29,
+  jaw thrust, ``protrusion`` cm at activation 1, perpendicular to the hinge axis in the
+  horizontal plane) and sideways (AU30, ``excursion`` cm along the hinge axis, toward the
+  subject's left or right), so the mandible is a rigid body with translation, not a
+  hinge alone. The weight
   w is 1 on the lower lip and the rim below the hinge, 0 on the upper lip and above the
   hinge, and harmonic in between (the graph Laplacian's Dirichlet problem), so the opening
   spreads smoothly through the cheeks and the lips part without tearing the corners.
@@ -49,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .mesh import FaceMesh, smooth_interpolation
-from .muscles import MuscleSet
+from .muscles import JAW_CONTROLS, MuscleSet
 
 #: The lips part as a wedge over this fraction of the mouth's width from each corner.
 JAW_WEDGE = 0.3
@@ -88,7 +93,9 @@ class Rig:
 
     jaw_column : activation column of the jaw, -1 without one; jaw_weight : (n,) w;
     jaw_hinge : (3,) a point on the hinge axis; jaw_axis : (3,) its unit direction (+x);
-    jaw_max : θ at activation 1 (radians); lid_column : (n,) activation column of the
+    jaw_max : θ at activation 1 (radians); jaw_glide_column : (3,) activation columns of
+    the glide forward, to the left and to the right (-1 without a jaw); jaw_glide : (3, 3)
+    the glide (cm) of each at activation 1; lid_column : (n,) activation column of the
     eyelid moving each vertex, -1 for none; lid_centre : (n, 3) its eyeball centre;
     lid_delta : (n, 3) (Δx, Δφ, Δr) at full closure; lid_raise_column : (n,) activation
     column of the levator raising the vertex's upper lid, -1 for none; lid_raise_delta :
@@ -106,6 +113,8 @@ class Rig:
     jaw_hinge: np.ndarray
     jaw_axis: np.ndarray
     jaw_max: float
+    jaw_glide_column: np.ndarray
+    jaw_glide: np.ndarray
     lid_column: np.ndarray
     lid_centre: np.ndarray
     lid_delta: np.ndarray
@@ -227,8 +236,14 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
         drive_column[jaw_weight > 0] = jaw_column
         drive_weight[:] = JAW_DRIVE * jaw_weight
         drive_weight[corners] = 1.0
+        glide_column = np.array([muscles.index(c) for c in JAW_CONTROLS[1:]], dtype=np.int64)
+        forward = np.array([0.0, 0.0, 1.0]) - axis[2] * axis  # in the horizontal plane: the axis is +x
+        forward /= np.linalg.norm(forward)
+        jaw = muscles.jaw
+        glide = np.array([jaw.protrusion * forward, jaw.excursion * axis, -jaw.excursion * axis])
     else:
         jaw_column, jaw_weight, hinge, axis, jaw_max = -1, np.zeros(n), np.zeros(3), np.array([1.0, 0, 0]), 0.0
+        glide_column, glide = np.full(3, -1, dtype=np.int64), np.zeros((3, 3))
     lid_column = np.full(n, -1, dtype=np.int64)
     lid_centre = np.zeros((n, 3))
     lid_delta = np.zeros((n, 3))
@@ -257,6 +272,6 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
     normal = np.concatenate([np.zeros((0, 3))] + [np.tile([0.0, np.cos(tilt), -np.sin(tilt)], (len(up), 1))
                                                  for up, _, tilt in parts])
     gap = np.minimum(CONTACT_GAP, np.einsum("kd,kd->k", mesh.vertices[upper] - mesh.vertices[lower], normal))
-    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, lid_column, lid_centre, lid_delta, lid_raise_column,
+    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, glide_column, glide, lid_column, lid_centre, lid_delta, lid_raise_column,
                lid_raise_delta, drive_column, drive_weight,
                upper, lower, normal, gap)

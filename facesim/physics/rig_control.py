@@ -41,18 +41,31 @@ def _rig_control(model, control):
     """Where the jaw and eyelids (facesim.physics.rig) take each vertex under the activations of
     ``control``: its rest position slid over the eyeball by the lid closure c and the
     levator's raise a (c Δ_close + a (1 - c) Δ_raise in cylindrical coordinates about the
-    eye's horizontal axis), then turned about the jaw hinge by w θ, into ``control.target``.
+    eye's horizontal axis), then turned about the jaw hinge by w θ and carried by w times
+    the jaw's glide (Σ activation × ``jaw_glide``), into ``control.target``.
     ``control.hold`` is the extra stiffness driving the lips and lid contours,
     drive * min(1, 10 a) for the activation a of their control (a lid's: the larger of its
-    closure and its raise): zero while the jaw and lids are at rest. Then the muscles'
+    closure and its raise; the jaw's: the largest of its opening and glides): zero while
+    the jaw and lids are at rest. Then the muscles'
     ends, from where the bones hold them (``_muscle_geometry``)."""
     activation = control.activation
     theta = model.jaw_max * activation[model.jaw_column] if model.jaw_column >= 0 else 0.0
+    gx = gy = gz = 0.0
+    gliding = 0.0
+    for k in range(model.jaw_glide_column.shape[0]):
+        if model.jaw_glide_column[k] >= 0:
+            g = activation[model.jaw_glide_column[k]]
+            gliding = max(gliding, g)
+            gx += g * model.jaw_glide[k, 0]
+            gy += g * model.jaw_glide[k, 1]
+            gz += g * model.jaw_glide[k, 2]
     for i in range(model.rest_position.shape[0]):
         px, py, pz = model.rest_position[i, 0], model.rest_position[i, 1], model.rest_position[i, 2]
         column = model.drive_column[i]
         a = activation[model.lid_raise_column[i]] if model.lid_raise_column[i] >= 0 else 0.0
         driving = max(activation[column], a) if column >= 0 else 0.0
+        if column >= 0 and column == model.jaw_column:
+            driving = max(driving, gliding)
         control.hold[i] = model.drive * model.drive_weight[i] * min(1.0, 10.0 * driving)
         if model.lid_column[i] >= 0:
             c = activation[model.lid_column[i]]
@@ -68,6 +81,9 @@ def _rig_control(model, control):
         if theta != 0.0 and model.jaw_weight[i] > 0.0:
             h, a = model.jaw_hinge, model.jaw_axis
             px, py, pz = _rotate(px, py, pz, h[0], h[1], h[2], a[0], a[1], a[2], model.jaw_weight[i] * theta)
+        if gliding != 0.0:
+            w = model.jaw_weight[i]
+            px, py, pz = px + w * gx, py + w * gy, pz + w * gz
         control.target[i, 0] = px
         control.target[i, 1] = py
         control.target[i, 2] = pz

@@ -292,10 +292,11 @@ class FaceRenderer:
         for node, centre in self._eyes:  # the eyeball is built at the origin, pupil along +z
             self._scene.set_pose(node, _pose(rotation(gaze_yaw, gaze_pitch), centre))
 
-    def render(self, positions: np.ndarray, arrows: np.ndarray | None = None, pose=None, jaw: float = 0.0) -> np.ndarray:
+    def render(self, positions: np.ndarray, arrows: np.ndarray | None = None, pose=None, jaw=0.0) -> np.ndarray:
         """One frame: positions (n, 3) of the face, optional arrows (n, 3) drawn from
         each vertex (muscle forces), optional head and gaze angles (5,) in degrees, the
-        jaw's angle (radians; a figure's teeth and tongue turn with it).
+        jaw's angle (radians) or its pose (4,): angle and glide (Animation.jaw; a
+        figure's teeth and tongue turn and glide with it).
         Returns (height, width, 3) uint8."""
         return self._finished(self._drawn(self._prepared(positions, arrows, pose, jaw)))
 
@@ -331,7 +332,7 @@ class FaceRenderer:
             if finishing is not None:
                 yield finishing.result()
 
-    def _prepared(self, positions: np.ndarray, arrows, pose, jaw: float, slot: int = 0) -> tuple:
+    def _prepared(self, positions: np.ndarray, arrows, pose, jaw, slot: int = 0) -> tuple:
         """What a frame (``render``) uploads, computed without OpenGL, so on any thread:
         the head's angles (and a mask's gaze), and the vertex arrays as [(primitive,
         array)], a figure's written into the arrays of ``slot`` (0 or 1)."""

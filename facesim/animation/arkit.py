@@ -1,0 +1,105 @@
+"""The blendshape vocabulary face rigs share: Apple ARKit's 52 shapes (what Live Link
+Face, MediaPipe's face blendshapes and most capture and export tools speak), with ICT
+FaceKit's spellings of its 57 as aliases, each resolved to a FACS form facesim drives
+through its muscles and bones (facesim.animation.timeline). A spec's ``arkit:`` weights
+and timeline targets take these names; ``facesim shapes`` lists them.
+
+A weight is a shape's, 0-1, as a capture gives it: unlike ``aus:`` intensities, which
+are FACS scores, weights are not passed through FACS's co-occurrence rules (a captured
+smile and frown already are what the face did). ARKit's one-sided shapes are the
+subject's side (``mouthSmileLeft`` lifts the subject's left corner, the ``_L`` of ICT
+and of FACS's ``AU12_L``).
+
+The map follows ICT FaceKit's FACS table (its README): ``mouthShrugUpper`` is its AU10,
+``mouthUpperUp`` its AU11, ``cheekSquint`` its AU6. ICT's ``cheekRaiser_L`` is a second
+scan of the same unit and maps to AU6_L too; ICT splits ARKit's ``browInnerUp`` into its
+two sides (``browInnerUp_L``: AU1_L). Shapes whose anatomy facesim does not simulate
+yet name what is missing (``NOT_SIMULATED``) and are refused, never silently dropped.
+"""
+
+from __future__ import annotations
+
+#: ARKit's 52 blendshapes, Apple's spelling, in the order of Live Link Face's CSV.
+ARKIT_52 = (
+    "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft", "eyeSquintLeft", "eyeWideLeft",
+    "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight", "eyeLookOutRight", "eyeLookUpRight", "eyeSquintRight",
+    "eyeWideRight",
+    "jawForward", "jawRight", "jawLeft", "jawOpen",
+    "mouthClose", "mouthFunnel", "mouthPucker", "mouthRight", "mouthLeft", "mouthSmileLeft", "mouthSmileRight",
+    "mouthFrownLeft", "mouthFrownRight", "mouthDimpleLeft", "mouthDimpleRight", "mouthStretchLeft", "mouthStretchRight",
+    "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper", "mouthPressLeft", "mouthPressRight",
+    "mouthLowerDownLeft", "mouthLowerDownRight", "mouthUpperUpLeft", "mouthUpperUpRight",
+    "browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft", "browOuterUpRight",
+    "cheekPuff", "cheekSquintLeft", "cheekSquintRight",
+    "noseSneerLeft", "noseSneerRight",
+    "tongueOut",
+)
+
+#: ARKit's shapes that are one FACS unit on both sides, or on one side (``_L``/``_R``
+#: added from the name's Left/Right), by ICT's table.
+_PAIRED = {
+    "eyeBlink": "AU45", "eyeSquint": "AU7", "eyeWide": "AU5", "mouthSmile": "AU12", "mouthFrown": "AU15",
+    "mouthDimple": "AU14", "mouthStretch": "AU20", "mouthPress": "AU24", "mouthLowerDown": "AU16",
+    "mouthUpperUp": "AU11", "browDown": "AU4", "browOuterUp": "AU2", "cheekSquint": "AU6", "noseSneer": "AU9",
+}
+_WHOLE = {
+    "jawForward": "AU29", "jawLeft": "AU30_L", "jawRight": "AU30_R", "jawOpen": "AU27", "mouthFunnel": "AU22",
+    "mouthPucker": "AU18", "mouthShrugLower": "AU17", "mouthShrugUpper": "AU10", "browInnerUp": "AU1",
+}
+
+#: Shapes facesim has no anatomy for yet, and what each needs.
+NOT_SIMULATED = {
+    **{f"eyeLook{d}{s}": "the lids following the eye's gaze" for d in ("Down", "In", "Out", "Up") for s in ("Left", "Right")},
+    "mouthClose": "the lips closed by the orbicularis oris over an open jaw",
+    "mouthLeft": "the lips drawn to one side as a whole", "mouthRight": "the lips drawn to one side as a whole",
+    "mouthRollLower": "the lower lip rolled in (AU28)", "mouthRollUpper": "the upper lip rolled in (AU28)",
+    "cheekPuff": "air pressure in the mouth pushing the cheeks out (AU34)",
+    "tongueOut": "the tongue as a rigged part (AU19)",
+    "PupilDilate_L": "the pupil's radius in the renderer", "PupilDilate_R": "the pupil's radius in the renderer",
+}
+
+
+def _facs(name: str) -> str | None:
+    for stem, unit in _PAIRED.items():
+        for side, letter in (("Left", "L"), ("Right", "R")):
+            if name == stem + side:
+                return f"{unit}_{letter}"
+    return _WHOLE.get(name)
+
+
+#: ARKit name -> its FACS form, for the shapes facesim simulates.
+ARKIT_FACS = {name: _facs(name) for name in ARKIT_52 if name not in NOT_SIMULATED}
+
+#: ICT FaceKit's 57 shape names -> the ARKit name or FACS form they stand for.
+ICT_ALIASES = {
+    **{f"{stem}_{letter}": f"{stem}{side}" for stem in list(_PAIRED) + [f"eyeLook{d}" for d in ("Down", "In", "Out", "Up")]
+       for letter, side in (("L", "Left"), ("R", "Right"))},
+    "browInnerUp_L": "AU1_L", "browInnerUp_R": "AU1_R",
+    "cheekRaiser_L": "AU6_L", "cheekRaiser_R": "AU6_R",
+    "cheekPuff_L": "cheekPuff", "cheekPuff_R": "cheekPuff",
+    "PupilDilate_L": "PupilDilate_L", "PupilDilate_R": "PupilDilate_R",
+    **{name: name for name in ("jawForward", "jawLeft", "jawRight", "jawOpen", "mouthClose", "mouthFunnel", "mouthPucker",
+                               "mouthLeft", "mouthRight", "mouthRollLower", "mouthRollUpper", "mouthShrugLower",
+                               "mouthShrugUpper")},
+}
+
+#: Every name a spec's ``arkit:`` takes.
+SHAPE_NAMES = tuple(ARKIT_52) + tuple(n for n in ICT_ALIASES if n not in ARKIT_52)
+
+
+def shape_facs(name: str) -> str:
+    """The FACS form (``AU12_L``) an ARKit or ICT shape name stands for; ValueError for
+    an unknown name or a shape facesim does not simulate yet."""
+    arkit = ICT_ALIASES.get(name, name)
+    if arkit.startswith("AU"):
+        return arkit
+    if name in NOT_SIMULATED or arkit in NOT_SIMULATED:
+        why = NOT_SIMULATED.get(name) or NOT_SIMULATED[arkit]
+        raise ValueError(f"{name} is not simulated yet (it needs {why})")
+    if arkit not in ARKIT_FACS:
+        raise ValueError(f"{name!r} is not an ARKit or ICT FaceKit shape name (see `facesim shapes`)")
+    return ARKIT_FACS[arkit]
+
+
+def is_shape_name(name: str) -> bool:
+    return name in ARKIT_52 or name in ICT_ALIASES
