@@ -345,6 +345,57 @@ def muscles_command(
 
 @app.command()
 @handled
+def shapes(
+    mesh: Optional[Path] = MESH,
+    muscles: Optional[Path] = MUSCLES,
+):
+    """List the shapes a spec's arkit: takes (ARKit's 52, ICT FaceKit's spellings) and the
+    action units, with the muscles and controls that drive each on this face."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from .animation.arkit import ARKIT_52, ICT_ALIASES, missing, shape_facs
+    from .animation.timeline import ACTION_UNITS, ONE_SIDED, au_muscles
+    from .config import DEFAULT_MESH, default_muscles
+    from .face.loading import load_face
+    from .face.muscle_file import load_muscles
+
+    mesh = mesh or DEFAULT_MESH
+    names = load_muscles(muscles or default_muscles(mesh), load_face(mesh)).names
+
+    def drives(unit: str) -> str:
+        try:
+            return ", ".join(f"{m} {w:g}" if w != 1 else m for m, w in au_muscles(unit, names).items())
+        except ValueError as exc:
+            return f"not on this face: {exc}"
+
+    aliases: dict[str, list[str]] = {}
+    for ict, target in ICT_ALIASES.items():
+        aliases.setdefault(target, []).append(ict)
+    table = Table(title=f"ARKit's 52 shapes on {mesh.name} (a spec's arkit:, 0-1; ICT's spellings are aliases)")
+    for column in ("ARKit", "ICT", "FACS", "drives"):
+        table.add_column(column)
+    extra = [name for name in aliases if name not in ARKIT_52]
+    for name in [*ARKIT_52, *extra]:
+        ict = ", ".join(n for n in aliases.get(name, []) if n != name) or ("" if name not in ICT_ALIASES else name)
+        if missing(name):
+            table.add_row(name if name in ARKIT_52 else "", ict, "", f"not simulated yet: needs {missing(name)}")
+            continue
+        unit = shape_facs(name)
+        table.add_row(name if name in ARKIT_52 else "", ict or (name if name not in ARKIT_52 else ""), unit, drives(unit))
+    units = Table(title="FACS action units (a spec's aus:, A-E or 0-1; _L or _R for one side)")
+    for column in ("AU", "name", "drives"):
+        units.add_column(column)
+    for unit, (name, _) in ACTION_UNITS.items():
+        units.add_row(unit + (" (_L/_R)" if unit in ONE_SIDED else ""), name,
+                      drives(f"{unit}_L" if unit in ONE_SIDED else unit) + (" (the _L form)" if unit in ONE_SIDED else ""))
+    console = Console(width=160)
+    console.print(table)
+    console.print(units)
+
+
+@app.command()
+@handled
 def sheet(
     inputs: list[Path] = typer.Argument(..., help="expression specs or directories of them"),
     output: Path = typer.Option(..., "-o", "--output", help="PNG to write"),

@@ -5,7 +5,7 @@ force f (eq. 3.1), angular zone α (eq. 3.2) and radial falloff r, r_max (eq. 3.
 searched by Nelder-Mead, left and right together, so that the unit simulated alone at
 full intensity (facesim.animation.calibration.hold) matches ICT's displacement at the simulated
 vertices, carried over the head's face area, against ICT's shape there
-(``tests/data/ict_action_units.npz``) in direction and amplitude, with no
+(``tests/data/ict_shapes.npz``) in direction and amplitude, with no
 inverted triangle and settling. The loss is
 
     (1 - cosine) + ½ ln(amplitude)² + 0.3 inverted + ⅒ max(0, log10(unsettled / 1e-3)),
@@ -56,7 +56,7 @@ from scipy.optimize import minimize
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from facesim.animation.calibration import FRAMES, compare, hold, on_face  # noqa: E402
+from facesim.animation.calibration import FRAMES, compare, hold, hold_row, ict_fields, on_face  # noqa: E402
 from facesim.animation.timeline import ACTION_UNITS  # noqa: E402
 from facesim.config import HEAD, HEAD_MUSCLES  # noqa: E402
 from facesim.errors import InputError, SimulationError  # noqa: E402
@@ -66,7 +66,7 @@ from facesim.face.material import MaterialSpec, face_model  # noqa: E402
 from facesim.face.muscle_file import MuscleFile, resolve_muscles  # noqa: E402
 from facesim.physics.mesh import mirror_map  # noqa: E402
 
-DATA = ROOT / "tests" / "data" / "ict_action_units.npz"
+DATA = ROOT / "tests" / "data" / "ict_shapes.npz"
 #: Placement search: insertions among the vertices ICT moves most on the muscle's side,
 #: attachments this far (cm) from the insertion along ICT's motion there.
 INSERTIONS, LENGTHS = 6, (1.5, 2.5, 3.5, 5.0)
@@ -87,9 +87,9 @@ class Calibration:
         self.raw = yaml.safe_load(HEAD_MUSCLES.read_text())
         self.defaults = self.raw.get("defaults", {})
         data = np.load(DATA)
-        self.ict = {str(au): d.astype(np.float64) for au, d in zip(data["action_units"], data["displacement"])}
         #: ICT's shapes over the face area, what the fit is measured against (as REALISM.md is)
-        self.ict_face = {str(au): d.astype(np.float64) for au, d in zip(data["action_units"], data["face_area"])}
+        self.ict_face = ict_fields(data)
+        self.ict = {row: field[data["landmark_vertex"]] for row, field in self.ict_face.items()}
         self.material = material
         self.mirror = mirror_map(self.mesh.vertices, self.mesh.faces)
         # the head and its follow do not change with the muscles: built once, not per evaluation
@@ -145,7 +145,7 @@ class Calibration:
 
     def measure(self, raw: dict, au: str, model=None):
         """The unit held on the file ``raw`` (or on its ``model``, built already) against ICT's."""
-        held = hold(self.model(raw) if model is None else model, au, frames=self.frames, figure=self.figure)
+        held = hold_row(self.model(raw) if model is None else model, au, frames=self.frames, figure=self.figure)
         return compare(on_face(self.figure, held.displacement), self.ict_face[au]), held
 
     def loss(self, raw: dict, au: str) -> float:
@@ -281,8 +281,9 @@ def main() -> int:
     parser.add_argument("--write", action="store_true", help=f"write the parameters into {HEAD_MUSCLES.relative_to(ROOT)}")
     parser.add_argument("--frames", type=int, default=FRAMES, help="frames each trial is held (the fold tests hold 200)")
     parser.add_argument("--pairs", default="", help="pairs of units, such as AU18+AU23,AU18+AU24, that must settle too")
-    parser.add_argument("--also", default="", help="units, such as AU24, that share the calibrated unit's muscles: "
-                                                    "their losses join its loss")
+    parser.add_argument("--also", default="", help="units, such as AU24, or ICT's shapes, such as mouthSmile_L (the "
+                                                    "unit's one side), that share the calibrated unit's muscles: their "
+                                                    "losses join its loss")
     parser.add_argument("--no-place", action="store_true", help="keep the linear muscles where the file has them")
     parser.add_argument("--min-zone", type=float, default=BOUNDS["zone"][0],
                         help="the narrowest angular zone searched, degrees (a cone of 15 degrees holds 1-3 of the simulated "

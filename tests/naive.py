@@ -214,13 +214,15 @@ def rig_targets(model, activation):
     slid = np.column_stack([p[:, 0] + delta[:, 0], rig.lid_centre[:, 1] + r * np.sin(phi), rig.lid_centre[:, 2] + r * np.cos(phi)])
     p = np.where(((c != 0) | (a != 0))[:, None], slid, p)
     if rig.jaw_column >= 0:
-        angle = rig.jaw_weight * rig.jaw_max * activation[rig.jaw_column]
-        p = rig.jaw_hinge + Rotation.from_rotvec(angle[:, None] * rig.jaw_axis).apply(p - rig.jaw_hinge)
-        p = p + rig.jaw_weight[:, None] * (activation[rig.jaw_glide_column] @ rig.jaw_glide)
+        w = rig.jaw_weight + activation[rig.jaw_seal_column] * rig.jaw_seal  # the lips' seal changes the weight
+        p = rig.jaw_hinge + Rotation.from_rotvec((w * rig.jaw_max * activation[rig.jaw_column])[:, None] * rig.jaw_axis
+                                                 ).apply(p - rig.jaw_hinge)
+        p = p + w[:, None] * (activation[rig.jaw_glide_column] @ rig.jaw_glide)
     driven = rig.drive_column >= 0
     a = np.maximum(activation[np.maximum(rig.drive_column, 0)], a)
     if rig.jaw_column >= 0:
-        a = np.where(rig.drive_column == rig.jaw_column, np.maximum(a, activation[rig.jaw_glide_column].max()), a)
+        jaw = max(activation[rig.jaw_glide_column].max(), activation[rig.jaw_seal_column])
+        a = np.where(rig.drive_column == rig.jaw_column, np.maximum(a, jaw), a)
     hold = np.where(driven, model.material.drive * rig.drive_weight * np.minimum(1.0, 10.0 * a), 0.0)
     return p, hold
 

@@ -43,7 +43,7 @@ def test_indices_valid_and_on_the_side_the_name_says(mesh, muscles):
             assert max(sides) < 0, name
         else:
             assert max(abs(s) for s in sides) < 1e-6, name
-    assert muscles.controls == ("jaw", "jaw_thrust", "jaw_sideways_l", "jaw_sideways_r", "eyelid_r", "levator_palpebrae_r",
+    assert muscles.controls == ("jaw", "jaw_thrust", "jaw_sideways_l", "jaw_sideways_r", "lip_seal", "eyelid_r", "levator_palpebrae_r",
                                 "eyelid_l", "levator_palpebrae_l")
 
 

@@ -1,14 +1,17 @@
-"""Each FACS action unit against ICT FaceKit's light-stage shape for it (issue 16).
+"""Each FACS action unit, and each of ICT FaceKit's 57 shapes alone, against ICT's
+light-stage shape for it (issues 16 and 46).
 
-Every unit of ICT's FACS table that anatomy lets a face drive is simulated alone at full
-intensity on the default head and held, and its displacement at the simulated vertices is
-carried over the head's face area as the head shows it (facesim.animation.calibration.on_face) and
-compared there with ICT's own shape, vertex for vertex, as REALISM.md does
-(``tests/data/ict_action_units.npz``, provenance in its README):
+Every unit of ICT's FACS table that anatomy lets a face drive, and every ICT shape as the
+control it stands for (a side alone: mouthSmile_L is AU12_L; the jaw's glides), is
+simulated alone at full intensity on the default head and held, and its displacement at
+the simulated vertices is carried over the head's face area as the head shows it
+(facesim.animation.calibration.on_face) and compared there with ICT's own shape, vertex
+for vertex, as REALISM.md does (``tests/data/ict_shapes.npz``, provenance in its README):
 direction (cosine at least 0.8) and amplitude (norm ratio 0.75-1.33), no inverted
-triangle. ``CALIBRATED`` lists the units ``scripts/calibrate.py`` has brought within those
-bounds; the others are expected to fail until they are (strict: a unit that starts
-passing fails here until it is listed), so the table below tracks REALISM.md.
+triangle. ``CALIBRATED`` lists the rows ``scripts/calibrate.py`` has brought within those
+bounds; the others are expected to fail until they are (strict: a row that starts
+passing fails here until it is listed), so the table below tracks REALISM.md. The left
+and right of a pair are mirror images of each other within 1 mm.
 """
 
 from pathlib import Path
@@ -16,7 +19,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from facesim.animation.calibration import AMPLITUDE, COSINE, ICT_SHAPES, compare, hold, on_face
+from facesim.animation.calibration import (
+    AMPLITUDE,
+    COSINE,
+    ICT_EXPRESSIONS,
+    ICT_ROWS,
+    compare,
+    hold,
+    hold_row,
+    ict_fields,
+    on_face,
+    row_control,
+)
 from facesim.animation.simulate import model_for
 from facesim.animation.spec import Spec
 from facesim.animation.timeline import ACTION_UNITS
@@ -25,15 +39,22 @@ from facesim.face.figure import figure_for
 from facesim.face.head import load_head
 from facesim.face.material import face_model
 
-DATA = Path(__file__).parent / "data" / "ict_action_units.npz"
-#: Units within the bounds on the default head (REALISM.md).
-CALIBRATED = {"AU1", "AU2", "AU4", "AU5", "AU6", "AU7", "AU9", "AU10", "AU11", "AU12", "AU14", "AU15", "AU16", "AU17", "AU18", "AU20", "AU22", "AU24", "AU26", "AU27", "AU45"}
+DATA = Path(__file__).parent / "data" / "ict_shapes.npz"
+#: Rows within the bounds on the default head (REALISM.md).
+CALIBRATED = {"AU1", "AU2", "AU4", "AU5", "AU6", "AU7", "AU9", "AU10", "AU11", "AU12", "AU14", "AU15", "AU16", "AU17", "AU18", "AU20", "AU22", "AU24", "AU26", "AU27", "AU45",
+              "browDown_L", "browDown_R", "browOuterUp_L", "browOuterUp_R", "cheekRaiser_L", "cheekRaiser_R",
+              "cheekSquint_L", "cheekSquint_R", "eyeBlink_L", "eyeBlink_R", "eyeSquint_L", "eyeSquint_R", "eyeWide_L",
+              "eyeWide_R", "jawForward", "jawLeft", "jawOpen", "jawRight", "mouthDimple_L", "mouthDimple_R",
+              "mouthFrown_L", "mouthFrown_R", "mouthFunnel", "mouthLowerDown_L", "mouthLowerDown_R", "mouthPress_L",
+              "mouthPress_R", "mouthPucker", "mouthShrugLower", "mouthShrugUpper",
+              "mouthStretch_L", "mouthStretch_R", "mouthUpperUp_L", "mouthUpperUp_R", "noseSneer_L", "noseSneer_R"}
+#: ICT's shapes with nothing on the face area to compare: the pupils' dilation moves the eyeballs' irises alone.
+OFF_FACE = {"PupilDilate_L", "PupilDilate_R"}
 
 
 @pytest.fixture(scope="module")
 def ict():
-    data = np.load(DATA)
-    return {str(au): d.astype(np.float64) for au, d in zip(data["action_units"], data["face_area"])}
+    return ict_fields(np.load(DATA))
 
 
 @pytest.fixture(scope="module")
@@ -41,27 +62,54 @@ def head_model():
     return model_for(Spec.model_validate(dict(name="neutral", frames=1)))
 
 
-def test_calibration_data_lies_on_the_default_heads_simulated_vertices(ict):
+def test_calibration_data_is_icts_shapes_on_the_default_heads_face(ict):
     data = np.load(DATA)
-    assert list(data["action_units"]) == list(ICT_SHAPES)
+    assert list(data["expression_names"]) == list(ICT_EXPRESSIONS)
     assert np.array_equal(data["landmark_vertex"], load_head(HEAD).landmarks)
-    # ICT's smile moves the lip corners about 1.5 cm: the data is ICT's, in cm
+    # ICT's smile moves the lip corners about 1.5 cm, one side of it as far: the data is ICT's, in cm
     assert 1.3 < np.linalg.norm(ict["AU12"], axis=1).max() < 1.8
-    # the landmark vertices' field is the face area's at those vertices
-    assert np.array_equal(data["displacement"], data["face_area"][:, data["landmark_vertex"]])
+    assert 1.3 < np.linalg.norm(ict["mouthSmile_L"], axis=1).max() < 1.8
+    assert np.array_equal(ict["AU12"], ict["mouthSmile_L"] + ict["mouthSmile_R"])
 
 
-@pytest.mark.parametrize("au", list(ICT_SHAPES))
-def test_action_unit_matches_icts_scanned_shape(au, ict, head_model, request):
-    if au not in CALIBRATED:
-        request.applymarker(pytest.mark.xfail(strict=True, reason=f"{au} is not calibrated yet (REALISM.md)"))
-    assert au in ACTION_UNITS, f"{au} is not driven"
-    held = hold(head_model, au)
-    figure = figure_for(head_model)
-    c = compare(on_face(figure, held.displacement), ict[au])
-    assert c.cosine >= COSINE, f"{au}: cosine {c.cosine:.2f} with ICT's shape"
-    assert AMPLITUDE[0] <= c.amplitude <= AMPLITUDE[1], f"{au}: amplitude {c.amplitude:.2f} of ICT's"
-    assert held.inverted == 0, f"{au}: {held.inverted} inverted triangles"
+@pytest.fixture(scope="module")
+def head_figure(head_model):
+    return figure_for(head_model)
+
+
+@pytest.mark.parametrize("row", [r for r in ICT_ROWS if r not in OFF_FACE])
+def test_each_unit_and_shape_matches_icts_scanned_shape(row, ict, head_model, head_figure, request):
+    if row not in CALIBRATED:
+        request.applymarker(pytest.mark.xfail(strict=True, reason=f"{row} is not simulated or calibrated yet (REALISM.md)"))
+    unit = row_control(row)
+    assert unit.split("_")[0] in ACTION_UNITS or unit in head_model.muscles.names, f"{row} is not driven"
+    held = hold_row(head_model, row, figure=head_figure)
+    c = compare(on_face(head_figure, held.displacement), ict[row])
+    assert c.cosine >= COSINE, f"{row} ({unit}): cosine {c.cosine:.2f} with ICT's shape"
+    assert AMPLITUDE[0] <= c.amplitude <= AMPLITUDE[1], f"{row} ({unit}): amplitude {c.amplitude:.2f} of ICT's"
+    assert held.inverted == 0, f"{row} ({unit}): {held.inverted} inverted triangles"
+
+
+PAIRS = [(r, r[:-2] + "_R") for r in ICT_EXPRESSIONS if r.endswith("_L") and r not in OFF_FACE] + [
+    ("jawLeft", "jawRight"), ("mouthLeft", "mouthRight")]
+
+
+@pytest.mark.parametrize("pair", PAIRS, ids="+".join)
+def test_the_left_and_right_of_a_pair_are_mirror_images(pair, head_model, head_figure):
+    """The left shape alone and the right one alone, reflected through the midline onto the
+    left (the head's mirror map, x negated), within 1 mm of each other at every simulated
+    vertex."""
+    from facesim.physics.mesh import mirror_map
+
+    try:
+        left, right = (row_control(shape) for shape in pair)
+    except ValueError as exc:
+        pytest.xfail(str(exc))
+    mirror = mirror_map(head_model.rest_position, head_model.faces)
+    moved = {side: hold(head_model, unit, figure=head_figure).displacement for side, unit in (("L", left), ("R", right))}
+    reflected = moved["R"][mirror] * np.array([-1.0, 1.0, 1.0])
+    assert np.linalg.norm(moved["L"], axis=1).max() > 0.2  # it moves the face
+    assert np.linalg.norm(moved["L"] - reflected, axis=1).max() < 0.1
 
 
 def head_file_and_model_with(head_model, change):

@@ -45,12 +45,13 @@ _PAIRED = {
 _WHOLE = {
     "jawForward": "AU29", "jawLeft": "AU30_L", "jawRight": "AU30_R", "jawOpen": "AU27", "mouthFunnel": "AU22",
     "mouthPucker": "AU18", "mouthShrugLower": "AU17", "mouthShrugUpper": "AU10", "browInnerUp": "AU1",
+    # no FACS unit: the lips sealed over the open jaw, a control of the jaw's rig (facesim.physics.rig)
+    "mouthClose": "lip_seal",
 }
 
 #: Shapes facesim has no anatomy for yet, and what each needs.
 NOT_SIMULATED = {
     **{f"eyeLook{d}{s}": "the lids following the eye's gaze" for d in ("Down", "In", "Out", "Up") for s in ("Left", "Right")},
-    "mouthClose": "the lips closed by the orbicularis oris over an open jaw",
     "mouthLeft": "the lips drawn to one side as a whole", "mouthRight": "the lips drawn to one side as a whole",
     "mouthRollLower": "the lower lip rolled in (AU28)", "mouthRollUpper": "the upper lip rolled in (AU28)",
     "cheekPuff": "air pressure in the mouth pushing the cheeks out (AU34)",
@@ -67,7 +68,8 @@ def _facs(name: str) -> str | None:
     return _WHOLE.get(name)
 
 
-#: ARKit name -> its FACS form, for the shapes facesim simulates.
+#: ARKit name -> its FACS form (or, with none, the control it drives), for the shapes
+#: facesim simulates.
 ARKIT_FACS = {name: _facs(name) for name in ARKIT_52 if name not in NOT_SIMULATED}
 
 #: ICT FaceKit's 57 shape names -> the ARKit name or FACS form they stand for.
@@ -87,15 +89,20 @@ ICT_ALIASES = {
 SHAPE_NAMES = tuple(ARKIT_52) + tuple(n for n in ICT_ALIASES if n not in ARKIT_52)
 
 
+def missing(name: str) -> str | None:
+    """What a shape facesim does not simulate yet needs; None for any other name."""
+    return NOT_SIMULATED.get(name) or NOT_SIMULATED.get(ICT_ALIASES.get(name, name))
+
+
 def shape_facs(name: str) -> str:
-    """The FACS form (``AU12_L``) an ARKit or ICT shape name stands for; ValueError for
-    an unknown name or a shape facesim does not simulate yet."""
+    """The FACS form (``AU12_L``) an ARKit or ICT shape name stands for, or the control
+    it drives where FACS has no unit for it (``lip_seal``); ValueError for an unknown
+    name or a shape facesim does not simulate yet."""
     arkit = ICT_ALIASES.get(name, name)
     if arkit.startswith("AU"):
         return arkit
-    if name in NOT_SIMULATED or arkit in NOT_SIMULATED:
-        why = NOT_SIMULATED.get(name) or NOT_SIMULATED[arkit]
-        raise ValueError(f"{name} is not simulated yet (it needs {why})")
+    if missing(name):
+        raise ValueError(f"{name} is not simulated yet (it needs {missing(name)})")
     if arkit not in ARKIT_FACS:
         raise ValueError(f"{name!r} is not an ARKit or ICT FaceKit shape name (see `facesim shapes`)")
     return ARKIT_FACS[arkit]

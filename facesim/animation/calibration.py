@@ -16,8 +16,8 @@ On the default head the simulated vertices are MediaPipe's landmarks, vertex k l
 ICT's vertex ``Head.landmarks[k]``. facesim's field is compared where the head shows it,
 carried over its face area by the head's follow (``on_face``, facesim.face.figure), against
 ICT's full shape there, as ``scripts/realism.py`` does; the tests read ICT's shape from
-``tests/data/ict_action_units.npz`` (about 35 kB per unit over the face area, and its
-value at the landmark vertices, which ``scripts/calibrate.py`` fits to). ICT's
+``tests/data/ict_shapes.npz`` (ICT's 57 shapes over the face area, as ICT ships them;
+``scripts/calibrate.py`` fits to their value at the landmark vertices). ICT's
 displacement at the landmarks alone, carried over the face by the same follow, keeps
 cosine at least 0.95 with its full shape for every unit: the simulated mesh can carry
 every unit, and the face area weighs each region by how much of the face it is (the lips
@@ -26,7 +26,7 @@ and lids have many vertices there, few landmarks).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -44,6 +44,33 @@ ICT_SHAPES = {
     "AU26": ["jawOpen"], "AU27": ["jawOpen"], "AU45": ["eyeBlink_L", "eyeBlink_R"],
 }
 ICT_WEIGHT = {"AU26": 0.5}
+#: ICT FaceKit's 57 expression shapes, in its file's order: each is also compared alone,
+#: with the control it stands for (facesim.animation.arkit.shape_facs: a side alone, the
+#: jaw's glides, ...), so a one-sided shape is measured against ICT's shape for that side.
+ICT_EXPRESSIONS = (
+    "PupilDilate_L", "PupilDilate_R", "browDown_L", "browDown_R", "browInnerUp_L", "browInnerUp_R", "browOuterUp_L",
+    "browOuterUp_R", "cheekPuff_L", "cheekPuff_R", "cheekRaiser_L", "cheekRaiser_R", "cheekSquint_L", "cheekSquint_R",
+    "eyeBlink_L", "eyeBlink_R", "eyeLookDown_L", "eyeLookDown_R", "eyeLookIn_L", "eyeLookIn_R", "eyeLookOut_L",
+    "eyeLookOut_R", "eyeLookUp_L", "eyeLookUp_R", "eyeSquint_L", "eyeSquint_R", "eyeWide_L", "eyeWide_R", "jawForward",
+    "jawLeft", "jawOpen", "jawRight", "mouthClose", "mouthDimple_L", "mouthDimple_R", "mouthFrown_L", "mouthFrown_R",
+    "mouthFunnel", "mouthLeft", "mouthLowerDown_L", "mouthLowerDown_R", "mouthPress_L", "mouthPress_R", "mouthPucker",
+    "mouthRight", "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper", "mouthSmile_L", "mouthSmile_R",
+    "mouthStretch_L", "mouthStretch_R", "mouthUpperUp_L", "mouthUpperUp_R", "noseSneer_L", "noseSneer_R",
+)
+#: Every row compared: the 21 action units (ICT's sums), then each of ICT's shapes alone.
+ICT_ROWS = {**ICT_SHAPES, **{name: [name] for name in ICT_EXPRESSIONS}}
+#: Shapes that correct another: ICT's mouthClose is the lips closed over jawOpen (alone,
+#: its lower lip would pass through the upper one). Such a row is simulated on top of its
+#: base, and the difference from the base alone is compared.
+ON_TOP = {"mouthClose": "AU27"}
+
+
+def row_control(row: str) -> str:
+    """The FACS form a row is simulated as: an action unit is itself, an ICT shape the
+    control it stands for (ValueError for a shape facesim does not simulate yet)."""
+    from .arkit import shape_facs
+
+    return row if row in ICT_SHAPES else shape_facs(row)
 #: ICT's face area: its vertices 0-9408.
 FACE_AREA = 9409
 #: A vertex takes part in the comparison when either field moves it this far (cm).
@@ -69,13 +96,20 @@ class Comparison:
         return self.cosine >= COSINE and AMPLITUDE[0] <= self.amplitude <= AMPLITUDE[1]
 
 
-def ict_displacement(shapes, au: str) -> np.ndarray:
-    """(N, 3) ICT's displacement for ``au`` over its whole head, from ``shapes.npz``
-    (``expression_names``, ``expression_deltas``)."""
-    names = list(shapes["expression_names"])
+def ict_displacement(shapes, row: str) -> np.ndarray:
+    """(N, 3) ICT's displacement for a row (an action unit or one of ICT's shapes) over
+    the vertices ``shapes`` gives, from its ``expression_names`` and ``expression_deltas``
+    (ICT's ``shapes.npz``, or the tests' ``ict_shapes.npz`` over the face area)."""
+    names = [str(n) for n in shapes["expression_names"]]
     deltas = shapes["expression_deltas"]
-    total = sum(deltas[names.index(n)].astype(np.float64) for n in ICT_SHAPES[au])
-    return ICT_WEIGHT.get(au, 1.0) * total
+    total = sum(deltas[names.index(n)].astype(np.float64) for n in ICT_ROWS[row])
+    return ICT_WEIGHT.get(row, 1.0) * total
+
+
+def ict_fields(shapes) -> dict[str, np.ndarray]:
+    """Every row's ICT displacement over the face area, (FACE_AREA, 3) in cm, from ICT's
+    shapes (``tests/data/ict_shapes.npz`` or ICT's own file)."""
+    return {row: ict_displacement(shapes, row)[:FACE_AREA] for row in ICT_ROWS}
 
 
 def compare(ours: np.ndarray, theirs: np.ndarray) -> Comparison:
@@ -123,9 +157,12 @@ def hold(model, au: str | tuple[str, ...], intensity: float = 1.0, frames: int =
     from ..face.figure import figure_for
     from ..physics.run import run
     from .spec import Spec, activation_table
+    from .timeline import AU_NAME
 
     units = (au,) if isinstance(au, str) else au
-    spec = Spec.model_validate(dict(name="+".join(units), frames=frames, onset=ONSET, aus={u: intensity for u in units}))
+    facs = {u: intensity for u in units if AU_NAME.fullmatch(u)}  # and controls (a shape FACS has no unit for)
+    spec = Spec.model_validate(dict(name="+".join(units), frames=frames, onset=ONSET, aus=facs,
+                                    activations={u: intensity for u in units if u not in facs}))
     positions, energy, inverted, _ = run(model, activation_table(spec, model.muscles), spec.dt, stop_on_inversion=False)
     displacement = positions[-1] - model.rest_position
     figure = figure_for(model) if figure is None else figure
@@ -133,3 +170,14 @@ def hold(model, au: str | tuple[str, ...], intensity: float = 1.0, frames: int =
         displacement = displacement * figure.follow_gain[:, None]
     return Held(displacement, int(inverted.max()), float(energy[-1] / max(energy.max(), 1e-300)), energy,
                 float(np.linalg.norm(positions[-1] - positions[-2], axis=1).max()))
+
+
+def hold_row(model, row: str, figure=None, frames: int = FRAMES) -> Held:
+    """A row's control held (``hold``); for a row that corrects another (``ON_TOP``), held
+    on top of its base, its displacement the difference from the base held alone."""
+    unit = row_control(row)
+    if row not in ON_TOP:
+        return hold(model, unit, frames=frames, figure=figure)
+    base = hold(model, ON_TOP[row], frames=frames, figure=figure)
+    both = hold(model, (ON_TOP[row], unit), frames=frames, figure=figure)
+    return replace(both, displacement=both.displacement - base.displacement)

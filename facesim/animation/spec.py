@@ -424,7 +424,8 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
     for au, curve in apply_cooccurrence({a: np.clip(c, 0, 1) for a, c in au_curves.items()}).items():
         table += np.outer(curve, au_vector(au, f"aus -> {au}"))
     for name, curve in shape_curves.items():
-        table += np.outer(np.clip(curve, 0, 1), au_vector(shape_facs(name), f"arkit -> {name}"))
+        unit, where = shape_facs(name), f"arkit -> {name}"
+        table += np.outer(np.clip(curve, 0, 1), au_vector(unit, where) if AU_NAME.fullmatch(unit) else muscle_vector(unit, where))
 
     for k, include in enumerate(spec.include):
         path = spec.resolve(include.spec)

@@ -44,8 +44,9 @@ class JawRig:
 
 #: The jaw's controls, activation columns after the muscles: its opening about the hinge
 #: (MPEG-4 open_jaw, AU26/27), its glide forward (thrust_jaw, AU29) and to either side
-#: (AU30 left and right: one column each, as activations are 0-1).
-JAW_CONTROLS = ("jaw", "jaw_thrust", "jaw_sideways_l", "jaw_sideways_r")
+#: (AU30 left and right: one column each, as activations are 0-1), and the lips sealed
+#: over it as it opens (ARKit's mouthClose: facesim.physics.rig).
+JAW_CONTROLS = ("jaw", "jaw_thrust", "jaw_sideways_l", "jaw_sideways_r", "lip_seal")
 
 
 @dataclass(frozen=True)

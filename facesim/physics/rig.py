@@ -15,7 +15,12 @@ acting on top.
   jaw thrust, ``protrusion`` cm at activation 1, perpendicular to the hinge axis in the
   horizontal plane) and sideways (AU30, ``excursion`` cm along the hinge axis, toward the
   subject's left or right), so the mandible is a rigid body with translation, not a
-  hinge alone. The weight
+  hinge alone. The lips sealed over the open jaw (``lip_seal``, ARKit's mouthClose: the
+  orbicularis oris holding the lips together while the jaw drops, as for /p b m/ spoken
+  open) take the weight s w' = w + s Δw, Δw = -w on the lips and the corners, harmonic
+  out to zero at the rim and above the hinge: the lower lip stays with the upper one and
+  the skin over the chin stretches between it and the jaw (ICT's mouthClose on top of
+  jawOpen: the lower lip back up 3.6 cm, the chin's skin less the further down). The weight
   w is 1 on the lower lip and the rim below the hinge, 0 on the upper lip and above the
   hinge, and harmonic in between (the graph Laplacian's Dirichlet problem), so the opening
   spreads smoothly through the cheeks and the lips part without tearing the corners.
@@ -93,7 +98,9 @@ class Rig:
 
     jaw_column : activation column of the jaw, -1 without one; jaw_weight : (n,) w;
     jaw_hinge : (3,) a point on the hinge axis; jaw_axis : (3,) its unit direction (+x);
-    jaw_max : θ at activation 1 (radians); jaw_glide_column : (3,) activation columns of
+    jaw_max : θ at activation 1 (radians); jaw_seal_column : activation column of the lips'
+    seal (-1 without a jaw); jaw_seal : (n,) Δw, each vertex's change of jaw weight when
+    sealed; jaw_glide_column : (3,) activation columns of
     the glide forward, to the left and to the right (-1 without a jaw); jaw_glide : (3, 3)
     the glide (cm) of each at activation 1; lid_column : (n,) activation column of the
     eyelid moving each vertex, -1 for none; lid_centre : (n, 3) its eyeball centre;
@@ -113,6 +120,8 @@ class Rig:
     jaw_hinge: np.ndarray
     jaw_axis: np.ndarray
     jaw_max: float
+    jaw_seal_column: int
+    jaw_seal: np.ndarray
     jaw_glide_column: np.ndarray
     jaw_glide: np.ndarray
     lid_column: np.ndarray
@@ -148,7 +157,8 @@ def _opening(mesh: FaceMesh, vertices: np.ndarray) -> np.ndarray | None:
 
 def _jaw(mesh: FaceMesh, muscles: MuscleSet):
     """The jaw's column, per-vertex weight, hinge point and axis, angle at activation 1,
-    and the mouth-corner vertices (driven firmly)."""
+    the mouth-corner vertices (driven firmly), and the weight's change when the lips are
+    sealed (Δw: module docstring)."""
     jaw = muscles.jaw
     x = mesh.vertices
     hinge = jaw.hinge
@@ -182,8 +192,12 @@ def _jaw(mesh: FaceMesh, muscles: MuscleSet):
     value = np.concatenate([lip_weight, np.full(len(corners), JAW_CORNER), below[rim].astype(float),
                             np.zeros(int((~below).sum()))])
     fixed, first = np.unique(fixed, return_index=True)  # the lips win over the rules after them
-    weight = harmonic(mesh, fixed, value[first, None])[:, 0]
-    return muscles.index("jaw"), np.clip(weight, 0.0, 1.0), hinge[0], axis, jaw.max_angle, corners
+    weight = np.clip(harmonic(mesh, fixed, value[first, None])[:, 0], 0.0, 1.0)
+    lips_and_corners = np.union1d(lips, corners)
+    still = np.setdiff1d(fixed, lips_and_corners)  # the rim and the skin above the hinge
+    seal = harmonic(mesh, np.concatenate([lips_and_corners, still]),
+                    np.concatenate([-weight[lips_and_corners], np.zeros(len(still))])[:, None])[:, 0]
+    return muscles.index("jaw"), weight, hinge[0], axis, jaw.max_angle, corners, np.clip(seal, -weight, 0.0)
 
 
 def _smoothstep(t: np.ndarray) -> np.ndarray:
@@ -232,11 +246,12 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
     drive_column = np.full(n, -1, dtype=np.int64)
     drive_weight = np.zeros(n)
     if muscles.jaw is not None:
-        jaw_column, jaw_weight, hinge, axis, jaw_max, corners = _jaw(mesh, muscles)
+        jaw_column, jaw_weight, hinge, axis, jaw_max, corners, seal = _jaw(mesh, muscles)
+        seal_column = muscles.index("lip_seal")
         drive_column[jaw_weight > 0] = jaw_column
         drive_weight[:] = JAW_DRIVE * jaw_weight
         drive_weight[corners] = 1.0
-        glide_column = np.array([muscles.index(c) for c in JAW_CONTROLS[1:]], dtype=np.int64)
+        glide_column = np.array([muscles.index(c) for c in JAW_CONTROLS[1:4]], dtype=np.int64)
         forward = np.array([0.0, 0.0, 1.0]) - axis[2] * axis  # in the horizontal plane: the axis is +x
         forward /= np.linalg.norm(forward)
         jaw = muscles.jaw
@@ -244,6 +259,7 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
     else:
         jaw_column, jaw_weight, hinge, axis, jaw_max = -1, np.zeros(n), np.zeros(3), np.array([1.0, 0, 0]), 0.0
         glide_column, glide = np.full(3, -1, dtype=np.int64), np.zeros((3, 3))
+        seal_column, seal = -1, np.zeros(n)
     lid_column = np.full(n, -1, dtype=np.int64)
     lid_centre = np.zeros((n, 3))
     lid_delta = np.zeros((n, 3))
@@ -272,6 +288,6 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
     normal = np.concatenate([np.zeros((0, 3))] + [np.tile([0.0, np.cos(tilt), -np.sin(tilt)], (len(up), 1))
                                                  for up, _, tilt in parts])
     gap = np.minimum(CONTACT_GAP, np.einsum("kd,kd->k", mesh.vertices[upper] - mesh.vertices[lower], normal))
-    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, glide_column, glide, lid_column, lid_centre, lid_delta, lid_raise_column,
+    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, seal_column, seal, glide_column, glide, lid_column, lid_centre, lid_delta, lid_raise_column,
                lid_raise_delta, drive_column, drive_weight,
                upper, lower, normal, gap)

@@ -42,16 +42,18 @@ def _rig_control(model, control):
     ``control``: its rest position slid over the eyeball by the lid closure c and the
     levator's raise a (c Δ_close + a (1 - c) Δ_raise in cylindrical coordinates about the
     eye's horizontal axis), then turned about the jaw hinge by w θ and carried by w times
-    the jaw's glide (Σ activation × ``jaw_glide``), into ``control.target``.
+    the jaw's glide (Σ activation × ``jaw_glide``), into ``control.target``; w is the
+    vertex's jaw weight changed by the lips' seal s, w + s Δw (``jaw_seal``).
     ``control.hold`` is the extra stiffness driving the lips and lid contours,
     drive * min(1, 10 a) for the activation a of their control (a lid's: the larger of its
-    closure and its raise; the jaw's: the largest of its opening and glides): zero while
+    closure and its raise; the jaw's: the largest of its opening, glides and seal): zero while
     the jaw and lids are at rest. Then the muscles'
     ends, from where the bones hold them (``_muscle_geometry``)."""
     activation = control.activation
     theta = model.jaw_max * activation[model.jaw_column] if model.jaw_column >= 0 else 0.0
     gx = gy = gz = 0.0
-    gliding = 0.0
+    sealed = activation[model.jaw_seal_column] if model.jaw_seal_column >= 0 else 0.0
+    gliding = sealed
     for k in range(model.jaw_glide_column.shape[0]):
         if model.jaw_glide_column[k] >= 0:
             g = activation[model.jaw_glide_column[k]]
@@ -78,11 +80,11 @@ def _rig_control(model, control):
                 px += c * model.lid_delta[i, 0] + a * model.lid_raise_delta[i, 0]
                 py = model.lid_centre[i, 1] + r * math.sin(phi)
                 pz = model.lid_centre[i, 2] + r * math.cos(phi)
-        if theta != 0.0 and model.jaw_weight[i] > 0.0:
+        w = model.jaw_weight[i] + sealed * model.jaw_seal[i]
+        if theta != 0.0 and w > 0.0:
             h, a = model.jaw_hinge, model.jaw_axis
-            px, py, pz = _rotate(px, py, pz, h[0], h[1], h[2], a[0], a[1], a[2], model.jaw_weight[i] * theta)
+            px, py, pz = _rotate(px, py, pz, h[0], h[1], h[2], a[0], a[1], a[2], w * theta)
         if gliding != 0.0:
-            w = model.jaw_weight[i]
             px, py, pz = px + w * gx, py + w * gy, pz + w * gz
         control.target[i, 0] = px
         control.target[i, 1] = py

@@ -1,0 +1,141 @@
+"""Every shape a face rig has (issue 46): ARKit's 52 names and ICT's spellings in a spec's
+``arkit:``, ``facesim shapes``, the jaw gliding forward and sideways as a rigid body, and
+the lips sealed over an open jaw (ARKit's mouthClose)."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import facesim
+from facesim.animation.arkit import ARKIT_52, ICT_ALIASES, NOT_SIMULATED, shape_facs
+from facesim.animation.calibration import ICT_EXPRESSIONS
+from facesim.animation.spec import Spec, activation_table
+from facesim.errors import InputError
+
+
+def table(model, **fields):
+    return activation_table(Spec.model_validate(dict(name="shapes", frames=35, **fields)), model.muscles)
+
+
+def test_the_vocabulary_is_arkits_52_and_icts_57():
+    assert len(ARKIT_52) == len(set(ARKIT_52)) == 52
+    assert {"eyeBlinkLeft", "mouthSmileRight", "jawForward", "cheekPuff", "tongueOut", "browInnerUp"} <= set(ARKIT_52)
+    assert set(ICT_ALIASES) == set(ICT_EXPRESSIONS)  # every ICT spelling is a name here
+    for name in ARKIT_52:  # each ARKit name is simulated or says what it needs
+        assert name in NOT_SIMULATED or shape_facs(name)
+    assert shape_facs("mouthSmileLeft") == shape_facs("mouthSmile_L") == "AU12_L"  # the subject's left
+    assert shape_facs("browInnerUp_L") == "AU1_L" and shape_facs("browInnerUp") == "AU1"
+    assert shape_facs("jawLeft") == "AU30_L" and shape_facs("jawForward") == "AU29"
+
+
+def test_arkit_weights_drive_what_their_facs_form_drives_without_cooccurrence(model):
+    """mouthSmileLeft 0.7 is AU12_L at 0.7; a smile and a frown given as shapes both act
+    (as FACS intensities, AU15 would weaken AU12: a capture's weights are what the face
+    did); an ICT spelling is the same control as Apple's."""
+    assert np.array_equal(table(model, arkit={"mouthSmileLeft": 0.7}), table(model, aus={"AU12_L": 0.7}))
+    assert np.array_equal(table(model, arkit={"mouthSmile_L": 0.7}), table(model, arkit={"mouthSmileLeft": 0.7}))
+    both = table(model, arkit={"mouthSmileLeft": 1.0, "mouthFrownLeft": 1.0})
+    smile = model.muscles.index("zygomaticus_major_l")
+    assert both[-1, smile] == pytest.approx(1.0)
+    assert table(model, aus={"AU12_L": 1.0, "AU15_L": 1.0})[-1, smile] == pytest.approx(0.0)
+    # mouthClose has no FACS unit: it drives the jaw rig's lip seal
+    assert table(model, arkit={"mouthClose": 0.5})[-1, model.muscles.index("lip_seal")] == pytest.approx(0.5)
+
+
+def test_arkit_timeline_tracks(model):
+    track = {"target": "jawLeft", "keys": [[0, 0], [20, 1]]}
+    keyed = table(model, timeline=[track])
+    column = model.muscles.index("jaw_sideways_l")
+    assert keyed[0, column] == 0 and keyed[-1, column] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("arkit, message", [
+    ({"mouthSmileLeftt": 0.5}, "'mouthSmileLeftt' is not an ARKit or ICT FaceKit shape name"),
+    ({"cheekPuff": 0.5}, "cheekPuff is not simulated yet .it needs air pressure in the mouth"),
+    ({"mouthSmileLeft": 1.5}, "less than or equal to 1"),
+])
+def test_a_bad_shape_is_one_line_naming_the_field(tmp_path, arkit, message):
+    path = tmp_path / "bad.yaml"
+    path.write_text(f"frames: 5\narkit: {arkit}\n")
+    result = subprocess.run([sys.executable, "-m", "facesim", "validate", str(path)], capture_output=True, text=True)
+    assert result.returncode != 0 and "Traceback" not in result.stderr
+    line = result.stderr.strip().splitlines()[-1]
+    assert str(path) in line and "arkit" in line
+    assert __import__("re").search(message, line), line
+
+
+def test_facesim_shapes_lists_every_name_with_what_drives_it():
+    result = subprocess.run([sys.executable, "-m", "facesim", "shapes"], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    out = result.stdout
+    for name in ARKIT_52:
+        assert name in out
+    assert "zygomaticus_major_l" in out and "jaw_sideways_l" in out and "lip_seal" in out
+    assert "not simulated yet: needs air pressure in the mouth" in out
+    assert "AU30 (_L/_R)" in out and "AU29" in out
+
+
+def held(aus=None, activations=None, frames=40):
+    animation = facesim.simulate(Spec.model_validate(dict(name="held", frames=frames, onset=10, aus=aus or {},
+                                                          activations=activations or {})))
+    assert animation.inverted.max() == 0
+    return animation
+
+
+def teeth(animation, frame):
+    """The lower incisors' midpoint (the foremost lower teeth within 5 mm of the midline)
+    and the upper teeth's vertices, where the figure puts them at ``frame``."""
+    figure = animation.figure
+    x = figure.positions(animation.positions[frame], animation.jaw_at(frame))
+    tooth = animation.model.mesh.head.part("teeth")
+    lower = np.intersect1d(tooth, figure.jaw_rows)
+    upper = np.setdiff1d(tooth, figure.jaw_rows)
+    front = lower[(np.abs(figure.rest[lower, 0]) < 0.5)]
+    front = front[figure.rest[front, 2] > np.percentile(figure.rest[front, 2], 80)]
+    return x[front].mean(axis=0), x[upper]
+
+
+def test_jaw_left_glides_the_lower_teeth_to_the_subjects_left_with_the_upper_still():
+    """AU30_L (ARKit's jawLeft): the lower incisors' midpoint at least 0.5 cm toward +x
+    (the subject's left), hardly up or down; the upper teeth do not move; the chin's skin
+    goes with the jaw; and AU30_R is its mirror image."""
+    left = held(aus={"AU30_L": 1.0})
+    rest_mid, rest_upper = teeth(left, 0)
+    mid, upper = teeth(left, left.frames - 1)
+    assert mid[0] - rest_mid[0] >= 0.5 and abs(mid[1] - rest_mid[1]) < 0.1
+    assert np.abs(upper - rest_upper).max() < 1e-9
+    chin = 152  # MediaPipe's chin
+    assert left.positions[-1, chin, 0] - left.rest[chin, 0] > 0.3
+    right = held(aus={"AU30_R": 1.0})
+    assert teeth(right, right.frames - 1)[0][0] - rest_mid[0] == pytest.approx(-(mid[0] - rest_mid[0]), abs=0.05)
+
+
+def test_jaw_forward_glides_the_lower_teeth_forward():
+    thrust = held(aus={"AU29": 1.0})
+    before, after = teeth(thrust, 0)[0], teeth(thrust, thrust.frames - 1)[0]
+    assert after[2] - before[2] >= 0.6 and abs(after[0] - before[0]) < 1e-6
+
+
+def test_the_lips_seal_over_an_open_jaw():
+    """jawOpen with mouthClose: the jaw (and the lower teeth) as open as with jawOpen
+    alone, the inner lips' middles (MediaPipe 13 over 14) back within 1 mm of each other,
+    where jawOpen alone parts them by over 2 cm; the chin's skin goes down with the jaw."""
+    open_ = held(aus={"AU27": 1.0})
+    sealed = held(aus={"AU27": 1.0}, activations={"lip_seal": 1.0})
+    gap = [np.linalg.norm(a.positions[-1, 13] - a.positions[-1, 14]) for a in (open_, sealed)]
+    rest_gap = np.linalg.norm(open_.rest[13] - open_.rest[14])
+    assert gap[0] > 2.0 and gap[1] < rest_gap + 0.1
+    assert teeth(sealed, sealed.frames - 1)[0] == pytest.approx(teeth(open_, open_.frames - 1)[0])
+    chin = 152
+    assert sealed.positions[-1, chin, 1] - sealed.rest[chin, 1] < -1.0
+
+
+def test_a_spec_without_a_jaw_refuses_the_jaws_shapes(tmp_path):
+    from facesim.config import HOPPER_MESH
+
+    path = tmp_path / "nojaw.muscles.yaml"
+    path.write_text("muscles:\n  - {name: zygomaticus_major_l, kind: linear, attachment: 411, insertion: 308}\n")
+    s = Spec.model_validate(dict(name="x", frames=5, arkit={"jawLeft": 1.0}, mesh=str(HOPPER_MESH), muscles=str(path)))
+    with pytest.raises(InputError, match="arkit -> jawLeft: AU30_L .jaw sideways. needs the jaw sideways"):
+        facesim.simulate(s)
