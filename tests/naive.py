@@ -207,12 +207,14 @@ def rig_targets(model, activation):
     rig, p = model.rig, model.rest_position.copy()
     c = np.where(rig.lid_column >= 0, activation[np.maximum(rig.lid_column, 0)], 0.0)
     a = np.where(rig.lid_raise_column >= 0, activation[np.maximum(rig.lid_raise_column, 0)], 0.0)
-    delta = c[:, None] * rig.lid_delta + (a * (1 - c))[:, None] * rig.lid_raise_delta
+    look = np.where(rig.lid_look_column >= 0, activation[np.maximum(rig.lid_look_column, 0)], 0.0)  # (n, 4)
+    delta = (c[:, None] * rig.lid_delta + (a * (1 - c))[:, None] * rig.lid_raise_delta
+             + np.einsum("ng,ngd->nd", look, rig.lid_look_delta))
     d = p - rig.lid_centre
     phi = np.arctan2(d[:, 1], d[:, 2]) + delta[:, 1]
     r = np.hypot(d[:, 1], d[:, 2]) + delta[:, 2]
     slid = np.column_stack([p[:, 0] + delta[:, 0], rig.lid_centre[:, 1] + r * np.sin(phi), rig.lid_centre[:, 2] + r * np.cos(phi)])
-    p = np.where(((c != 0) | (a != 0))[:, None], slid, p)
+    p = np.where(((c != 0) | (a != 0) | look.any(axis=1))[:, None], slid, p)
     if rig.jaw_column >= 0:
         w = rig.jaw_weight + activation[rig.jaw_seal_column] * rig.jaw_seal  # the lips' seal changes the weight
         p = rig.jaw_hinge + Rotation.from_rotvec((w * rig.jaw_max * activation[rig.jaw_column])[:, None] * rig.jaw_axis
@@ -221,10 +223,24 @@ def rig_targets(model, activation):
     driven = rig.drive_column >= 0
     a = np.maximum(activation[np.maximum(rig.drive_column, 0)], a)
     if rig.jaw_column >= 0:
-        jaw = max(activation[rig.jaw_glide_column].max(), activation[rig.jaw_seal_column])
-        a = np.where(rig.drive_column == rig.jaw_column, np.maximum(a, jaw), a)
+        a = np.where(rig.drive_column == rig.jaw_column, np.maximum(a, activation[rig.jaw_glide_column].max()), a)
+    a = np.where((rig.drive_column >= 0) & (rig.drive_column == rig.lid_column), np.maximum(a, look.max(axis=1)), a)
     hold = np.where(driven, model.material.drive * rig.drive_weight * np.minimum(1.0, 10.0 * a), 0.0)
     return p, hold
+
+
+def pressure_forces(model, xp, activation):
+    """The air in the mouth on its wall (facesim.physics.pressure): each triangle's area
+    vector ½ (X_j - X_i) × (X_k - X_i), a third to each corner at that corner's pressure."""
+    rig, out = model.rig, np.zeros_like(xp)
+    if rig.pressure_column[0] < 0:
+        return out
+    p = rig.pressure * (rig.pressure_weight @ activation[rig.pressure_column])
+    f = model.faces
+    area = 0.5 * np.cross(xp[f[:, 1]] - xp[f[:, 0]], xp[f[:, 2]] - xp[f[:, 0]])
+    for c in range(3):
+        np.add.at(out, f[:, c], (p[f[:, c]] / 3)[:, None] * area)
+    return out
 
 
 def step(model, x, v, activation, h):
@@ -247,19 +263,34 @@ def step(model, x, v, activation, h):
     if mat.bending:
         s, p = bending_terms(xp, target, model.hinge, model.hinge_weight, mat.bending)
         stiff, pull = stiff + s, pull + p - h * s[:, None] * v  # eq. 3.19's form: each vertex's own term at X, not X*
-    force = muscle_forces(model, xp, activation, target)
+    force = muscle_forces(model, xp, activation, target) + pressure_forces(model, xp, activation)
     denominator = np.maximum(mat.mass + h * mat.damping - h * h * stiff, mat.mass)
     v_new = (mat.mass * v + h * force + h * pull) / denominator[:, None]
     v_new[~free] = 0
-    return contacts(model, x + h * v_new, v_new)
+    return contacts(model, x + h * v_new, v_new, activation, target)
 
 
-def contacts(model, x, v):
+def contacts(model, x, v, activation, target):
     """Each lip and lid pair (upper, lower) kept its gap apart along its contact normal n;
-    both share the correction (a pinned one keeps still) and their mean velocity along n."""
+    both share the correction (a pinned one keeps still) and their mean velocity along n.
+    Lips sealed (s > 0) are kept within the gap and (1 - s) of a centimetre of where their
+    targets put one relative to the other, moved together along that difference."""
     x, v = x.copy(), v.copy()
     rig = model.rig
-    for u, l, n, gap in zip(rig.contact_upper, rig.contact_lower, rig.contact_normal, rig.contact_gap):
+    sealed = activation[rig.jaw_seal_column] if rig.jaw_seal_column >= 0 else 0.0
+    for u, l, n, gap, lips in zip(rig.contact_upper, rig.contact_lower, rig.contact_normal, rig.contact_gap,
+                                  rig.contact_lips):
+        e = (x[u] - x[l]) - (target[u] - target[l])
+        excess = np.linalg.norm(e) - (gap + (1 - sealed) * 1.0)
+        if sealed > 0 and lips and excess > 0:
+            e = e / np.linalg.norm(e)
+            moving = [k for k in (u, l) if not model.pinned[k]]
+            for k in moving:
+                x[k] -= (1 if k == u else -1) * excess / len(moving) * e
+            if e @ v[u] > e @ v[l]:
+                mean = (e @ v[u] + e @ v[l]) / 2
+                for k in (u, l):
+                    v[k] += ((mean if not model.pinned[k] else 0.0) - e @ v[k]) * e
         overlap = gap - n @ (x[u] - x[l])
         if overlap <= 0:
             continue

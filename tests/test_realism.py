@@ -47,7 +47,12 @@ CALIBRATED = {"AU1", "AU2", "AU4", "AU5", "AU6", "AU7", "AU9", "AU10", "AU11", "
               "eyeWide_R", "jawForward", "jawLeft", "jawOpen", "jawRight", "mouthDimple_L", "mouthDimple_R",
               "mouthFrown_L", "mouthFrown_R", "mouthFunnel", "mouthLowerDown_L", "mouthLowerDown_R", "mouthPress_L",
               "mouthPress_R", "mouthPucker", "mouthShrugLower", "mouthShrugUpper",
-              "mouthStretch_L", "mouthStretch_R", "mouthUpperUp_L", "mouthUpperUp_R", "noseSneer_L", "noseSneer_R"}
+              "mouthStretch_L", "mouthStretch_R", "mouthUpperUp_L", "mouthUpperUp_R", "noseSneer_L", "noseSneer_R",
+              "eyeLookUp_L", "eyeLookUp_R", "eyeLookDown_L", "eyeLookDown_R"}
+#: Gaze shapes are held to the lids' direction alone (issue 46): their amplitude over the
+#: face area is the head's follow spreading a lid landmark's motion (at the landmarks,
+#: looking up or down moves the lids 1.05-1.10 of ICT's), and ICT's eyeballs do not turn.
+GAZE_ROWS = {r for r in ICT_EXPRESSIONS if r.startswith("eyeLook")}
 #: ICT's shapes with nothing on the face area to compare: the pupils' dilation moves the eyeballs' irises alone.
 OFF_FACE = {"PupilDilate_L", "PupilDilate_R"}
 
@@ -86,7 +91,8 @@ def test_each_unit_and_shape_matches_icts_scanned_shape(row, ict, head_model, he
     held = hold_row(head_model, row, figure=head_figure)
     c = compare(on_face(head_figure, held.displacement), ict[row])
     assert c.cosine >= COSINE, f"{row} ({unit}): cosine {c.cosine:.2f} with ICT's shape"
-    assert AMPLITUDE[0] <= c.amplitude <= AMPLITUDE[1], f"{row} ({unit}): amplitude {c.amplitude:.2f} of ICT's"
+    if row not in GAZE_ROWS:
+        assert AMPLITUDE[0] <= c.amplitude <= AMPLITUDE[1], f"{row} ({unit}): amplitude {c.amplitude:.2f} of ICT's"
     assert held.inverted == 0, f"{row} ({unit}): {held.inverted} inverted triangles"
 
 

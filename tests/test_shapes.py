@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 import pytest
+
 import facesim
 from facesim.animation.arkit import ARKIT_52, ICT_ALIASES, NOT_SIMULATED, shape_facs
 from facesim.animation.calibration import ICT_EXPRESSIONS
@@ -52,7 +53,7 @@ def test_arkit_timeline_tracks(model):
 
 @pytest.mark.parametrize("arkit, message", [
     ({"mouthSmileLeftt": 0.5}, "'mouthSmileLeftt' is not an ARKit or ICT FaceKit shape name"),
-    ({"cheekPuff": 0.5}, "cheekPuff is not simulated yet .it needs air pressure in the mouth"),
+    ({"tongueOut": 0.5}, "tongueOut is not simulated yet .it needs the tongue as a rigged part"),
     ({"mouthSmileLeft": 1.5}, "less than or equal to 1"),
 ])
 def test_a_bad_shape_is_one_line_naming_the_field(tmp_path, arkit, message):
@@ -72,7 +73,7 @@ def test_facesim_shapes_lists_every_name_with_what_drives_it():
     for name in ARKIT_52:
         assert name in out
     assert "zygomaticus_major_l" in out and "jaw_sideways_l" in out and "lip_seal" in out
-    assert "not simulated yet: needs air pressure in the mouth" in out
+    assert "not simulated yet: needs the tongue as a rigged part" in out
     assert "AU30 (_L/_R)" in out and "AU29" in out
 
 
@@ -139,3 +140,46 @@ def test_a_spec_without_a_jaw_refuses_the_jaws_shapes(tmp_path):
     s = Spec.model_validate(dict(name="x", frames=5, arkit={"jawLeft": 1.0}, mesh=str(HOPPER_MESH), muscles=str(path)))
     with pytest.raises(InputError, match="arkit -> jawLeft: AU30_L .jaw sideways. needs the jaw sideways"):
         facesim.simulate(s)
+
+
+def test_a_cheek_puff_pushes_both_cheeks_out_with_the_lips_sealed():
+    """AU34 (ARKit's cheekPuff): the air in the closed mouth (facesim.physics.pressure)
+    moves the skin of each cheek beside the mouth (2-4 cm out from its centre, within 1.5
+    cm of its height) at least 0.5 cm outward along the skin's normal, on average; the
+    lips stay sealed (the inner lips' middles within 1 mm of their gap at rest); AU34_L
+    puffs the left cheek and leaves the right within a fifth of that."""
+    puffed = held(aus={"AU34": 1.0})
+    model, x = puffed.model, puffed.rest
+    mouth = x[[61, 291, 13, 14]].mean(axis=0)  # MediaPipe's mouth corners and inner lips
+    normal = model.arrays.rest_vertex_normal
+    beside = (np.abs(x[:, 1] - mouth[1]) < 1.5) & (np.abs(x[:, 0] - mouth[0]) > 2.0) & (np.abs(x[:, 0] - mouth[0]) < 4.0)
+
+    def outward(animation, side):
+        on_side = beside & (np.sign(x[:, 0] - mouth[0]) == side)
+        return np.einsum("ij,ij->i", animation.positions[-1] - x, normal)[on_side].mean()
+
+    assert outward(puffed, 1) >= 0.5 and outward(puffed, -1) >= 0.5
+    gap = np.linalg.norm(puffed.positions[-1, 13] - puffed.positions[-1, 14])
+    assert gap < np.linalg.norm(x[13] - x[14]) + 0.1, gap
+    left = held(aus={"AU34_L": 1.0})
+    assert outward(left, 1) >= 0.5 and abs(outward(left, -1)) < 0.2 * outward(left, 1)
+
+
+def test_looking_down_turns_that_eye_and_its_lids_follow():
+    """AU64_L (ARKit's eyeLookDownLeft): the subject's left eyeball turns down (its iris's
+    front moves down at least 3 mm) and the right one does not; the left upper lid's
+    middle (MediaPipe 386) comes down with it at least 5 mm, the lower lid (374) a little,
+    staying under it; the right lids stay."""
+    looked = held(aus={"AU64_L": 1.0})
+    figure, head = looked.figure, looked.model.mesh.head
+    last = looked.frames - 1
+    moved = figure.positions(looked.positions[last], looked.jaw_at(last), tuple(looked.pose[last, 3:5]), looked.pose[last, 5:9])
+    rest = figure.positions(looked.positions[0], looked.jaw_at(0))
+    left, right = sorted((head.part("eyeball_left"), head.part("eyeball_right")), key=lambda rows: -figure.rest[rows, 0].mean())
+    front = lambda rows: rows[figure.rest[rows, 2] > np.percentile(figure.rest[rows, 2], 90)]  # noqa: E731
+    assert (moved - rest)[front(left), 1].mean() < -0.3
+    assert np.abs(moved - rest)[right].max() < 1e-9
+    x, x0 = looked.positions[-1], looked.rest
+    assert x[386, 1] - x0[386, 1] < -0.5 and -0.4 < x[374, 1] - x0[374, 1] < 0
+    assert x[386, 1] > x[374, 1]
+    assert np.abs(x[159] - x0[159]).max() < 0.02 and np.abs(x[145] - x0[145]).max() < 0.02

@@ -47,14 +47,16 @@ _WHOLE = {
     "mouthPucker": "AU18", "mouthShrugLower": "AU17", "mouthShrugUpper": "AU10", "browInnerUp": "AU1",
     # no FACS unit: the lips sealed over the open jaw, a control of the jaw's rig (facesim.physics.rig)
     "mouthClose": "lip_seal",
+    # the eyes: up and down are FACS's AU63/AU64 per eye; out is toward the eye's own side
+    "eyeLookUpLeft": "AU63_L", "eyeLookDownLeft": "AU64_L", "eyeLookOutLeft": "AU61_L", "eyeLookInLeft": "AU62_L",
+    "eyeLookUpRight": "AU63_R", "eyeLookDownRight": "AU64_R", "eyeLookOutRight": "AU62_R", "eyeLookInRight": "AU61_R",
+    "cheekPuff": "AU34",
 }
 
 #: Shapes facesim has no anatomy for yet, and what each needs.
 NOT_SIMULATED = {
-    **{f"eyeLook{d}{s}": "the lids following the eye's gaze" for d in ("Down", "In", "Out", "Up") for s in ("Left", "Right")},
     "mouthLeft": "the lips drawn to one side as a whole", "mouthRight": "the lips drawn to one side as a whole",
     "mouthRollLower": "the lower lip rolled in (AU28)", "mouthRollUpper": "the upper lip rolled in (AU28)",
-    "cheekPuff": "air pressure in the mouth pushing the cheeks out (AU34)",
     "tongueOut": "the tongue as a rigged part (AU19)",
     "PupilDilate_L": "the pupil's radius in the renderer", "PupilDilate_R": "the pupil's radius in the renderer",
 }
@@ -78,7 +80,7 @@ ICT_ALIASES = {
        for letter, side in (("L", "Left"), ("R", "Right"))},
     "browInnerUp_L": "AU1_L", "browInnerUp_R": "AU1_R",
     "cheekRaiser_L": "AU6_L", "cheekRaiser_R": "AU6_R",
-    "cheekPuff_L": "cheekPuff", "cheekPuff_R": "cheekPuff",
+    "cheekPuff_L": "AU34_L", "cheekPuff_R": "AU34_R",
     "PupilDilate_L": "PupilDilate_L", "PupilDilate_R": "PupilDilate_R",
     **{name: name for name in ("jawForward", "jawLeft", "jawRight", "jawOpen", "mouthClose", "mouthFunnel", "mouthPucker",
                                "mouthLeft", "mouthRight", "mouthRollLower", "mouthRollUpper", "mouthShrugLower",

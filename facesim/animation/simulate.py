@@ -26,6 +26,7 @@ from ..face.figure import figure_for
 from ..face.head import identity_notice
 from ..face.loading import load_face_model
 from ..physics.model import Model
+from ..physics.muscles import GAZE_ANGLE
 from ..physics.run import Progress, diagnostics, muscle_forces, run
 from ..physics.twins import on_threads
 from ..timings import phase
@@ -183,6 +184,28 @@ def check_moved(model: Model, table: np.ndarray, moved: float, source: str) -> N
                                   "contract: a failed simulation, nothing written", len(table) - 1)
 
 
+def _posed(pose: np.ndarray | None, look: np.ndarray | None) -> np.ndarray | None:
+    """The pose table (frames, 5), with each eye's turn from the gaze controls after it
+    (frames, 9) when they act."""
+    if look is None:
+        return pose
+    return np.column_stack([np.zeros((len(look), 5)) if pose is None else pose, look])
+
+
+def look_table(model: Model, table: np.ndarray) -> np.ndarray | None:
+    """(frames, 4) each eye's turn in degrees from the gaze controls (yaw toward the
+    subject's left, pitch up; the subject's left eye, then the right), their activations
+    times ``GAZE_ANGLE``: what the renderer turns the eyeballs by, on top of the pose's
+    gaze; None when no gaze control acts."""
+    columns = model.rig.gaze_column
+    look = np.zeros((len(table), 4))
+    for eye in range(2):
+        if columns[eye, 0] >= 0:
+            up, down, left, right = (table[:, columns[eye, g]] * GAZE_ANGLE[g] for g in range(4))
+            look[:, 2 * eye], look[:, 2 * eye + 1] = left - right, up - down
+    return look if look.any() else None
+
+
 def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background: bool = False,
              with_muscle_forces: bool = False, stream: bool = False) -> Animation:
     """Simulate an expression spec from the neutral face. ``notice`` receives a one-line
@@ -264,7 +287,7 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
         smallest_area=smallest,
         seconds=seconds,
         model=model,
-        pose=pose_table(spec) if spec.pose else None,
+        pose=_posed(pose_table(spec) if spec.pose else None, look_table(model, table)),
         face=spec.face_directory,
         progress=progress,
         muscle_force=force,

@@ -114,10 +114,19 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     # the condyles glide along the articular eminence (facesim.physics.rig): forward, and
     # to one side (FACS scores AU30 with L or R: the side the jaw moves to)
     "AU29": ("jaw thrust", {"jaw_thrust": 1.0}),
+    # air held in the closed mouth pushes the cheeks out (facesim.physics.pressure); the
+    # lips are held shut against it (the jaw rig's seal: facesim.physics.contacts)
+    "AU34": ("cheek puff", {"cheek_puff": 1.0, "lip_seal": 1.0}),
     "AU30": ("jaw sideways", {"jaw_sideways": 1.0}),
     "AU43": ("eyes closed", {"eyelid": 1.0}),
     "AU45": ("blink", {"eyelid": 1.0}),
     "AU46": ("wink", {"eyelid": 1.0}),
+    # the eyes turned (FACS's eye positions), the lids following them (facesim.physics.rig);
+    # each eye alone with _L or _R (ARKit's eyeLookOutLeft is AU61_L, eyeLookInLeft AU62_L)
+    "AU61": ("eyes turned left", {"gaze_left": 1.0}),
+    "AU62": ("eyes turned right", {"gaze_right": 1.0}),
+    "AU63": ("eyes up", {"gaze_up": 1.0}),
+    "AU64": ("eyes down", {"gaze_down": 1.0}),
 }
 #: MPEG-4 facial animation parameters that name a control of this face (FAPs 3, 14 and
 #: 19-22), usable wherever a muscle name is, with values in [0, 1] of the control's range

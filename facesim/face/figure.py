@@ -99,10 +99,11 @@ class Figure:
     def triangles(self) -> np.ndarray:
         return np.concatenate([p.triangles for p in self.parts])
 
-    def positions(self, sim: np.ndarray, jaw=0.0, gaze: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    def positions(self, sim: np.ndarray, jaw=0.0, gaze: tuple[float, float] = (0.0, 0.0), look=None) -> np.ndarray:
         """(N, 3): the figure for simulated positions ``sim`` (n, 3), the jaw (its angle
-        in radians, or (4,): the angle and its glide in cm, as Animation.jaw) and the gaze
-        (yaw, pitch in degrees)."""
+        in radians, or (4,): the angle and its glide in cm, as Animation.jaw), the gaze
+        (yaw, pitch in degrees) and each eye's own turn on top of it (``look``, (4,): the
+        subject's left eye's yaw and pitch, then the right's; facesim.animation.simulate.look_table)."""
         jaw = np.atleast_1d(np.asarray(jaw, dtype=np.float64))
         jaw_angle, glide = jaw[0], jaw[1:4]
         x = np.empty_like(self.rest)
@@ -115,10 +116,11 @@ class Figure:
             x[self.jaw_rows] += self.jaw_weight[:, None] * (turned - rest)
         if glide.any() and len(self.jaw_rows):
             x[self.jaw_rows] += self.jaw_weight[:, None] * glide
-        if any(gaze):
-            turn = rotation(*gaze)
-            for rows, centre in self.eyes:
-                x[rows] = (x[rows] - centre) @ turn.T + centre
+        for rows, centre in self.eyes:
+            own = (0.0, 0.0) if look is None else look[0:2] if centre[0] > 0 else look[2:4]
+            yaw, pitch = gaze[0] + own[0], gaze[1] + own[1]
+            if yaw or pitch:
+                x[rows] = (x[rows] - centre) @ rotation(yaw, pitch).T + centre
         for rows, centre, radius in self.guards:
             d = x[rows] - centre
             r = np.linalg.norm(d, axis=1)

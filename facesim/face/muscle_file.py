@@ -25,7 +25,7 @@ from pydantic import Field, StrictInt, field_validator, model_validator
 from ..config import MIDLINE_FRACTION, SNAP_FRACTION
 from ..errors import InputError
 from ..physics.mesh import FaceMesh
-from ..physics.muscles import JAW_CONTROLS, LINEAR, SPHINCTER, EyelidRig, JawRig, MuscleSet
+from ..physics.muscles import GAZE, JAW_CONTROLS, LINEAR, PUFF_PRESSURE, SPHINCTER, EyelidRig, JawRig, MuscleSet
 from ..schema import Strict, load_model
 
 #: A landmark: a vertex index (an integer: YAML's ``true`` is not vertex 1) or a 3D point.
@@ -111,6 +111,8 @@ class Jaw(_Contours):
     # norms); ICT's jawForward carries the lower incisors 9 mm, its jawLeft 7.4 mm
     protrusion: float = Field(0.9, ge=0, le=2, description="cm the jaw glides forward at jaw_thrust 1 (AU29)")
     excursion: float = Field(0.75, ge=0, le=2, description="cm the jaw glides sideways at jaw_sideways_l/_r 1 (AU30)")
+    puff_pressure: float = Field(PUFF_PRESSURE, ge=0, description="the air pressure in the closed mouth (force per cm²) "
+                                 "at cheek_puff_l/_r 1 (AU34), pushing the cheeks out (facesim.physics.pressure)")
     contact_tilt: float = Field(0.0, ge=0, lt=90, description="degrees the plane the closed lips meet across "
                                 "turns from the horizontal, its front edge up (0: the upper lip only ever above the "
                                 "lower); 50 matches ICT's chin raiser and lip press on the default head (REALISM.md)")
@@ -292,7 +294,7 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         lower = np.array([_snap(p, mesh, f"{where}: lower", below=u) for p, u in zip(spec.jaw.lower, upper)], dtype=np.int64)
         _upper_over_lower(mesh, upper, lower, where)
         jaw = JawRig(hinge, lower, upper, float(np.radians(spec.jaw.max_angle)), float(np.radians(spec.jaw.contact_tilt)),
-                     spec.jaw.protrusion, spec.jaw.excursion)
+                     spec.jaw.protrusion, spec.jaw.excursion, spec.jaw.puff_pressure)
         controls += JAW_CONTROLS
     eyelids = []
     for lid in spec.eyelids:
@@ -302,8 +304,11 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         middle = mesh.vertices[np.concatenate([upper, lower])].mean(axis=0)
         _check_side(lid.name, (middle[0], middle[0]), width, where)
         _upper_over_lower(mesh, upper, lower, where)
-        eyelids.append(EyelidRig(lid.name, upper, lower, lid.reach, lid.levator, float(np.radians(lid.levator_angle))))
-        controls += [lid.name] + ([lid.levator] if lid.levator else [])
+        gaze = tuple(f"{g}_{lid.name[-1]}" for g in GAZE)  # the name's side: _check_side held it to it
+        if any(g in controls for g in gaze):
+            raise InputError(f"{where}: a second eyelid on the subject's {'left' if lid.name[-1] == 'l' else 'right'}")
+        eyelids.append(EyelidRig(lid.name, upper, lower, lid.reach, lid.levator, float(np.radians(lid.levator_angle)), gaze))
+        controls += [lid.name] + ([lid.levator] if lid.levator else []) + list(gaze)
     centre_start = np.cumsum([0] + [len(c) for c in centres]).astype(np.int64)
     return MuscleSet(
         names=tuple(m.name for m in spec.muscles) + tuple(controls),

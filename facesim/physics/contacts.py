@@ -1,25 +1,39 @@
 """Lips and lids kept apart: a position projection after each step, so the two lips (and
-the two lids) meet at their contact gap and never pass through each other.
+the two lids) meet at their contact gap and never pass through each other; and sealed
+lips kept together: the orbicularis oris holding them shut (the jaw rig's ``lip_seal``)
+stops them parting further than the rig puts them, against the air of a puffed mouth.
 """
 
+
+import math
 
 from numba import njit
 
 from ..config import NUMBA_OPTIONS
 
+#: How far apart (cm) lips sealed with s < 1 may part beyond where the rig puts them:
+#: (1 - s) of this. Sealed fully, not at all.
+SEAL_SLACK = 1.0
+
 
 @njit(**NUMBA_OPTIONS)
-def _contacts(model, state):
+def _contacts(model, state, control):
     """Lips and lids do not pass through each other: each pair (upper, lower) is kept at
     least its gap apart along its contact normal n (straight up for the lids, turned back
     for the lips: facesim.physics.rig), by moving both half the overlap along n and giving them
     their mean velocity along n (an inelastic contact; a single-layer mesh has no
-    collisions). Across n they slide freely."""
+    collisions). Across n they slide freely. A lip pair sealed with s > 0 is also kept
+    within its gap plus (1 - s) ``SEAL_SLACK`` of where the rig's targets put it relative
+    to each other: e = (X_u - X_l) - (T_u - T_l), |e| at most that, both moved half the
+    excess toward each other along e (``_held_together``)."""
     x, v, pinned = state.x, state.v, model.pinned
+    sealed = control.activation[model.jaw_seal_column] if model.jaw_seal_column >= 0 else 0.0
     for k in range(model.contact_upper.shape[0]):
         u = model.contact_upper[k]
         l = model.contact_lower[k]
         n = model.contact_normal[k]
+        if sealed > 0.0 and model.contact_lips[k]:
+            _held_together(x, v, pinned, control.target, u, l, model.contact_gap[k] + (1.0 - sealed) * SEAL_SLACK)
         overlap = model.contact_gap[k]
         for d in range(3):
             overlap -= n[d] * (x[u, d] - x[l, d])
@@ -39,3 +53,33 @@ def _contacts(model, state):
             for d in range(3):
                 v[u, d] += ((0.0 if pinned[u] else mean) - vn_u) * n[d]
                 v[l, d] += ((0.0 if pinned[l] else mean) - vn_l) * n[d]
+
+
+@njit(**NUMBA_OPTIONS)
+def _held_together(x, v, pinned, target, u, l, reach):
+    """Pair (u, l) kept within ``reach`` of where the targets put one relative to the
+    other: e = (X_u - X_l) - (T_u - T_l) shortened to ``reach`` when longer, each moving
+    half the excess along e (a pinned one keeps still), and their velocities along e
+    averaged if they part."""
+    ex = (x[u, 0] - x[l, 0]) - (target[u, 0] - target[l, 0])
+    ey = (x[u, 1] - x[l, 1]) - (target[u, 1] - target[l, 1])
+    ez = (x[u, 2] - x[l, 2]) - (target[u, 2] - target[l, 2])
+    length = math.sqrt(ex * ex + ey * ey + ez * ez)
+    if length <= reach:
+        return
+    e = (ex / length, ey / length, ez / length)
+    excess = length - reach
+    share_u = 0.0 if pinned[u] else (1.0 if pinned[l] else 0.5)
+    share_l = 0.0 if pinned[l] else 1.0 - share_u
+    vn_u = 0.0
+    vn_l = 0.0
+    for d in range(3):
+        x[u, d] -= share_u * excess * e[d]
+        x[l, d] += share_l * excess * e[d]
+        vn_u += e[d] * v[u, d]
+        vn_l += e[d] * v[l, d]
+    if vn_u > vn_l:
+        mean = 0.5 * (vn_u + vn_l)
+        for d in range(3):
+            v[u, d] += ((0.0 if pinned[u] else mean) - vn_u) * e[d]
+            v[l, d] += ((0.0 if pinned[l] else mean) - vn_l) * e[d]

@@ -258,8 +258,9 @@ def build_model(mesh: FaceMesh, muscles: MuscleSet, material: Material = Materia
         **{key: value for key, value in arrays.items() if key != "repulsion_rest_distance"},
         corner_rest_distance=_frozen(altitude.reshape(-1, 3).T), **constants,
         **{key: _frozen(np.asarray(value)) for key, value in vars(rig).items()
-           if key not in ("jaw_column", "jaw_max", "jaw_seal_column")},
+           if key not in ("jaw_column", "jaw_max", "jaw_seal_column", "pressure")},
         jaw_column=int(rig.jaw_column), jaw_max=float(rig.jaw_max), jaw_seal_column=int(rig.jaw_seal_column),
+        pressure=float(rig.pressure),
         **{key: float(getattr(resolved, key)) for key in ("mass", "damping", "stiffness", "nonlinearity",
                                                            "repulsion_nonlinearity", "tissue", "drive", "bending")},
         length_unit=length_unit, edge_repulsion=bool(resolved.edge_repulsion), uv_projection=bool(resolved.uv_projection),
@@ -325,8 +326,9 @@ REORDER_FROM = 4000
 #: new vertex order: rows per vertex, vertex numbers as values, rows per spring, per
 #: triangle or per hinge, compressed rows per vertex, or unchanged (per muscle, scalars).
 #: Every field is named once (tests/test_model.py), so a new one cannot be forgotten.
-PER_VERTEX = ("rest_position", "pinned", "tie", "rest_vertex_normal", "jaw_weight", "jaw_seal", "lid_column", "lid_centre",
-              "lid_delta", "lid_raise_column", "lid_raise_delta", "drive_column", "drive_weight")
+PER_VERTEX = ("rest_position", "pinned", "tie", "rest_vertex_normal", "jaw_weight", "jaw_seal", "pressure_weight", "lid_column", "lid_centre",
+              "lid_delta", "lid_raise_column", "lid_raise_delta", "lid_look_column", "lid_look_delta", "drive_column",
+              "drive_weight")
 VERTEX_VALUED = ("muscle_insertion", "muscle_centre_index", "contact_upper", "contact_lower")
 PER_SPRING = ("spring_indices", "spring_end", "spring_rest_length")
 PER_TRIANGLE = ("faces", "rest_normal", "rest_area", "rest_against", "corner", "corner_rest_distance",
@@ -335,7 +337,7 @@ PER_HINGE = ("hinge", "hinge_weight")
 PER_VERTEX_ROWS = ("neighbour_start", "neighbour_index", "ring_start", "ring_a", "ring_b")
 UNCHANGED = ("muscle_kind", "muscle_axes", "muscle_centre_start", "muscle_cos_zone", "muscle_r", "muscle_r_max",
              "muscle_force", "muscle_protrusion", "axis_x", "axis_z", "radius", "jaw_column", "jaw_hinge", "jaw_axis",
-             "jaw_max", "jaw_seal_column", "jaw_glide_column", "jaw_glide", "contact_normal", "contact_gap", "mass", "damping", "stiffness",
+             "jaw_max", "gaze_column", "contact_lips", "pressure_column", "pressure", "jaw_seal_column", "jaw_glide_column", "jaw_glide", "contact_normal", "contact_gap", "mass", "damping", "stiffness",
              "nonlinearity", "repulsion_nonlinearity", "length_unit", "tissue", "drive", "bending", "edge_repulsion",
              "uv_projection", "attached_regions", "implicit", "iterations", "tolerance")
 

@@ -31,7 +31,8 @@ LINEAR, SPHINCTER = 0, 1
 class JawRig:
     """The jaw resolved onto a mesh: hinge (2, 3) points in cm, lower/upper vertex indices,
     max_angle and the lips' contact_tilt in radians, and how far (cm) its condyles glide
-    forward (protrusion) and sideways (excursion) at activation 1."""
+    forward (protrusion) and sideways (excursion) at activation 1, and the pressure in the
+    mouth when the cheeks are puffed (puff_pressure, force per cm²)."""
 
     hinge: np.ndarray
     lower: np.ndarray
@@ -40,18 +41,26 @@ class JawRig:
     contact_tilt: float = 0.0
     protrusion: float = 0.0
     excursion: float = 0.0
+    puff_pressure: float = 0.0
 
 
+#: The air pressure in a puffed mouth (force per cm², facesim's units): on the default
+#: head, ICT's cheekPuff_L's amplitude (REALISM.md; 2000 gave 1.23 of it, and the
+#: cheeks' motion is linear in it).
+PUFF_PRESSURE = 1600.0
 #: The jaw's controls, activation columns after the muscles: its opening about the hinge
 #: (MPEG-4 open_jaw, AU26/27), its glide forward (thrust_jaw, AU29) and to either side
-#: (AU30 left and right: one column each, as activations are 0-1), and the lips sealed
-#: over it as it opens (ARKit's mouthClose: facesim.physics.rig).
-JAW_CONTROLS = ("jaw", "jaw_thrust", "jaw_sideways_l", "jaw_sideways_r", "lip_seal")
+#: (AU30 left and right: one column each, as activations are 0-1), the lips sealed
+#: over it as it opens (ARKit's mouthClose: facesim.physics.rig), and the air pressure
+#: in the mouth it closes, on each cheek (AU34, cheek puff: facesim.physics.pressure).
+JAW_CONTROLS = ("jaw", "jaw_thrust", "jaw_sideways_l", "jaw_sideways_r", "lip_seal", "cheek_puff_l", "cheek_puff_r")
 
 
 @dataclass(frozen=True)
 class EyelidRig:
-    """One eye's lid contours resolved onto a mesh, paired corner to corner."""
+    """One eye's lid contours resolved onto a mesh, paired corner to corner; ``gaze``
+    names the controls turning that eye up, down, to the subject's left and right
+    (``GAZE``), which its lids follow (facesim.physics.rig)."""
 
     name: str
     upper: np.ndarray
@@ -59,6 +68,17 @@ class EyelidRig:
     reach: float
     levator: str | None = None
     levator_angle: float = 0.0  # radians
+    gaze: tuple[str, ...] = ()
+
+
+#: An eye's gaze controls, each 0-1 (FACS AU63 eyes up, AU64 down, AU61 turned to the
+#: subject's left, AU62 to the right; per eye, ``_l`` or ``_r`` added: ARKit's
+#: eyeLookUpLeft is gaze_up_l, eyeLookOutLeft gaze_left_l, eyeLookInLeft gaze_right_l).
+GAZE = ("gaze_up", "gaze_down", "gaze_left", "gaze_right")
+#: How far (degrees) an eye turns at each gaze control's 1: about the rotations of ARKit's
+#: eyeLook shapes at full weight; the eyes' range is larger (up 45-50, down 60, to
+#: either side 50 degrees), but gazes beyond 30 degrees come with the head.
+GAZE_ANGLE = (25.0, 30.0, 30.0, 30.0)
 
 
 @dataclass(frozen=True)

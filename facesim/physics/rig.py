@@ -61,6 +61,15 @@ import numpy as np
 from .mesh import FaceMesh, smooth_interpolation
 from .muscles import JAW_CONTROLS, MuscleSet
 
+#: The wall of the oral cavity (AU34's pressure): an ellipse about the mouth's centre,
+#: (across, up and down) in mouth half-widths, at full weight inside CAVITY_CORE of it:
+#: the cheeks over the buccinators, out to the masseters, and the lips. Measured against
+#: ICT's cheekPuff_L on the default head (cosine): reaching (2.0, 1.6) 0.65, (3.0, 1.2)
+#: 0.76, (3.0, 1.0) 0.77; its centre raised or lowered a third of a half-width, 0.67 and
+#: 0.75. The rest of the gap is direction: the scan's cheeks move forward and a little
+#: up, where a pressure along the skin's normal pushes their sides out sideways.
+CAVITY_REACH = (3.0, 1.0)
+CAVITY_CORE = 0.5
 #: The lips part as a wedge over this fraction of the mouth's width from each corner.
 JAW_WEDGE = 0.3
 #: The mouth corners follow the jaw by this much of the lower lip's travel (a little less
@@ -90,6 +99,18 @@ LID_NASAL = 0.1
 LID_GAP = 0.02
 #: How far outside the eyeball the closed lid slides (cm): the lid's own thickness.
 LID_THICKNESS = 0.06
+#: How far (cm, at the contour's middle, less toward the corners as sin πs) the upper and
+#: lower lids follow the eye at gaze_up and gaze_down 1: the upper lid rides the cornea's
+#: top, down as far as the eye turns (it covers as much of the iris as looking ahead),
+#: the lower lid its bottom, less; to either side (gaze_left/right) both slide with the
+#: globe by LOOK_SIDE. ICT's eyeLook shapes measure them (the lids' middles: up 3.4 and
+#: 1.6 mm, down 7.4 and 2.0 mm, to the side 2.2 and 2.0 mm).
+LOOK_LIDS = ((0.34, 0.16), (-0.74, -0.20))
+LOOK_SIDE = 0.21
+#: The skin follows the lids' gaze out to this many eye widths around the opening (their
+#: closing reaches further: an eyelid's ``reach``). Against ICT's eyeLookUp_L at the
+#: landmarks: cosine 0.89, amplitude 1.05 (0.05-0.2 alike).
+LOOK_REACH = 0.2
 
 
 @dataclass(frozen=True)
@@ -98,7 +119,10 @@ class Rig:
 
     jaw_column : activation column of the jaw, -1 without one; jaw_weight : (n,) w;
     jaw_hinge : (3,) a point on the hinge axis; jaw_axis : (3,) its unit direction (+x);
-    jaw_max : θ at activation 1 (radians); jaw_seal_column : activation column of the lips'
+    jaw_max : θ at activation 1 (radians); pressure_column : (2,) activation columns of
+    the pressure in the mouth on the subject's left and right cheek (-1 without a jaw);
+    pressure_weight : (n, 2) each vertex's share of the cavity's wall on either side;
+    pressure : the pressure at activation 1, its sign the winding's (outward); jaw_seal_column : activation column of the lips'
     seal (-1 without a jaw); jaw_seal : (n,) Δw, each vertex's change of jaw weight when
     sealed; jaw_glide_column : (3,) activation columns of
     the glide forward, to the left and to the right (-1 without a jaw); jaw_glide : (3, 3)
@@ -106,11 +130,15 @@ class Rig:
     eyelid moving each vertex, -1 for none; lid_centre : (n, 3) its eyeball centre;
     lid_delta : (n, 3) (Δx, Δφ, Δr) at full closure; lid_raise_column : (n,) activation
     column of the levator raising the vertex's upper lid, -1 for none; lid_raise_delta :
-    (n, 3) (Δx, Δφ, Δr) at the levator's full activation; drive_column : (n,) the control
+    (n, 3) (Δx, Δφ, Δr) at the levator's full activation; lid_look_column : (n, 4) the
+    activation columns of the gaze controls of the eye moving each vertex (up, down, left,
+    right: facesim.physics.muscles.GAZE), -1 for none; lid_look_delta : (n, 4, 3) the
+    (Δx, Δφ, Δr) at each one's 1; gaze_column : (2, 4) the gaze controls' columns of the
+    subject's left eye and right eye, -1 without that eye; drive_column : (n,) the control
     whose activation drives the vertex to its target (the lips: the jaw; the lid contours:
     their eyelid), -1 for none; drive_weight : (n,) its share of ``Material.drive``;
     contact_upper, contact_lower : (k,) the lip and lid pairs that may not pass through
-    each other; contact_normal : (k, 3) the direction the upper one keeps above the lower
+    each other; contact_lips : (k,) whether a pair is the lips' (a seal holds those); contact_normal : (k, 3) the direction the upper one keeps above the lower
     (the lids: straight up; the lips: turned back by the jaw's ``contact_tilt``);
     contact_gap : (k,) the least gap each keeps along it.
     """
@@ -120,6 +148,9 @@ class Rig:
     jaw_hinge: np.ndarray
     jaw_axis: np.ndarray
     jaw_max: float
+    pressure_column: np.ndarray
+    pressure_weight: np.ndarray
+    pressure: float
     jaw_seal_column: int
     jaw_seal: np.ndarray
     jaw_glide_column: np.ndarray
@@ -129,10 +160,14 @@ class Rig:
     lid_delta: np.ndarray
     lid_raise_column: np.ndarray
     lid_raise_delta: np.ndarray
+    lid_look_column: np.ndarray
+    lid_look_delta: np.ndarray
+    gaze_column: np.ndarray
     drive_column: np.ndarray
     drive_weight: np.ndarray
     contact_upper: np.ndarray
     contact_lower: np.ndarray
+    contact_lips: np.ndarray
     contact_normal: np.ndarray
     contact_gap: np.ndarray
 
@@ -200,6 +235,29 @@ def _jaw(mesh: FaceMesh, muscles: MuscleSet):
     return muscles.index("jaw"), weight, hinge[0], axis, jaw.max_angle, corners, np.clip(seal, -weight, 0.0)
 
 
+def _cavity_wall(mesh: FaceMesh, jaw) -> tuple[np.ndarray, float]:
+    """The skin over the oral cavity, where the air in a puffed mouth pushes (AU34), as
+    (n, 2) weights on the subject's left and right, and the sign that turns the mesh's
+    winding outward. The wall is the ellipse about the mouth's centre reaching
+    ``CAVITY_REACH`` mouth half-widths across and up and down, weight 1 inside
+    ``CAVITY_CORE`` of it and easing to 0 at its edge; a vertex's side eases from one
+    cheek to the other across the middle quarter of the mouth, the lips shared."""
+    n = mesh.vertex_count
+    loop = _opening(mesh, jaw.lower)
+    if loop is None:
+        return np.zeros((n, 2)), 1.0
+    x = mesh.vertices
+    centre, half = x[loop].mean(axis=0), np.ptp(x[loop, 0]) / 2
+    u, v = (x[:, 0] - centre[0]) / half, (x[:, 1] - centre[1]) / half
+    r = np.hypot(u / CAVITY_REACH[0], v / CAVITY_REACH[1])
+    wall = 1.0 - _smoothstep((r - CAVITY_CORE) / (1.0 - CAVITY_CORE))
+    left = _smoothstep((u + 0.25) / 0.5)
+    f = mesh.faces
+    area = np.cross(x[f[:, 1]] - x[f[:, 0]], x[f[:, 2]] - x[f[:, 0]])
+    outward = float(np.sign((wall[f].mean(axis=1) * area[:, 2]).sum()) or 1.0)  # the face looks along +z
+    return np.column_stack([wall * left, wall * (1.0 - left)]), outward
+
+
 def _smoothstep(t: np.ndarray) -> np.ndarray:
     t = np.clip(t, 0.0, 1.0)
     return t * t * (3 - 2 * t)
@@ -214,7 +272,8 @@ def _cylindrical(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
 def _eyelid(mesh: FaceMesh, lid, opening: np.ndarray | None, centre: np.ndarray, radius: float, width: float):
     """The contour's (Δx, Δφ, Δr) at full closure, and at the levator's full raise,
     spread harmonically over the skin within ``reach`` eye widths of the opening.
-    Returns the region, its two deltas and the contour."""
+    Returns the region, its two deltas, its deltas at each gaze control's 1 (region, 4, 3)
+    and the contour."""
     x = mesh.vertices
     upper, lower = _cylindrical(x[lid.upper], centre), _cylindrical(x[lid.lower], centre)
     meet_x = lower[:, 0]
@@ -238,7 +297,19 @@ def _eyelid(mesh: FaceMesh, lid, opening: np.ndarray | None, centre: np.ndarray,
         raise_upper = np.column_stack([np.zeros_like(s), lid.levator_angle * np.sin(np.pi * s), np.zeros_like(s)])
         raised = harmonic(mesh, fixed, np.concatenate([raise_upper, np.zeros_like(delta_lower), still]))
     region = np.setdiff1d(np.flatnonzero(distance <= (0.5 + lid.reach) * width), corners)
-    return region, delta[region], raised[region], contour
+    s_upper = np.sin(np.pi * np.arange(1, len(lid.upper) + 1) / (len(lid.upper) + 1))  # corner to corner
+    s_lower = np.sin(np.pi * np.arange(1, len(lid.lower) + 1) / (len(lid.lower) + 1))
+    # the skin follows the lids' gaze less far than their closing: out to LOOK_REACH eye
+    # widths, the eye corners sliding half as far sideways
+    beyond = np.setdiff1d(np.flatnonzero(distance > (0.5 + LOOK_REACH) * width), np.concatenate([contour, corners]))
+    looks = []
+    for (up, low), side in zip(LOOK_LIDS + ((0.0, 0.0), (0.0, 0.0)), (0.0, 0.0, LOOK_SIDE, -LOOK_SIDE)):
+        on_upper = np.column_stack([np.full(len(s_upper), side), up * s_upper / upper[:, 2], np.zeros(len(s_upper))])
+        on_lower = np.column_stack([np.full(len(s_lower), side), low * s_lower / lower[:, 2], np.zeros(len(s_lower))])
+        on_corners = np.tile([side / 2, 0.0, 0.0], (len(corners), 1))
+        looks.append(harmonic(mesh, np.concatenate([contour, corners, beyond]),
+                              np.concatenate([on_upper, on_lower, on_corners, np.zeros((len(beyond), 3))]))[region])
+    return region, delta[region], raised[region], np.stack(looks, axis=1), contour
 
 
 def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
@@ -248,6 +319,9 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
     if muscles.jaw is not None:
         jaw_column, jaw_weight, hinge, axis, jaw_max, corners, seal = _jaw(mesh, muscles)
         seal_column = muscles.index("lip_seal")
+        pressure_column = np.array([muscles.index("cheek_puff_l"), muscles.index("cheek_puff_r")], dtype=np.int64)
+        pressure_weight, winding = _cavity_wall(mesh, muscles.jaw)
+        pressure = winding * muscles.jaw.puff_pressure
         drive_column[jaw_weight > 0] = jaw_column
         drive_weight[:] = JAW_DRIVE * jaw_weight
         drive_weight[corners] = 1.0
@@ -260,16 +334,20 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
         jaw_column, jaw_weight, hinge, axis, jaw_max = -1, np.zeros(n), np.zeros(3), np.array([1.0, 0, 0]), 0.0
         glide_column, glide = np.full(3, -1, dtype=np.int64), np.zeros((3, 3))
         seal_column, seal = -1, np.zeros(n)
+        pressure_column, pressure_weight, pressure = np.full(2, -1, dtype=np.int64), np.zeros((n, 2)), 0.0
     lid_column = np.full(n, -1, dtype=np.int64)
     lid_centre = np.zeros((n, 3))
     lid_delta = np.zeros((n, 3))
     lid_raise_column = np.full(n, -1, dtype=np.int64)
     lid_raise_delta = np.zeros((n, 3))
+    lid_look_column = np.full((n, 4), -1, dtype=np.int64)
+    lid_look_delta = np.zeros((n, 4, 3))
+    gaze_column = np.full((2, 4), -1, dtype=np.int64)
     for lid in muscles.eyelids:
         opening = _opening(mesh, lid.upper)
         points = mesh.vertices[opening if opening is not None else np.concatenate([lid.upper, lid.lower])]
         centre, radius = eyeball(points)
-        region, delta, raised, contour = _eyelid(mesh, lid, opening, centre, radius, float(np.ptp(points[:, 0])))
+        region, delta, raised, looks, contour = _eyelid(mesh, lid, opening, centre, radius, float(np.ptp(points[:, 0])))
         region_free = region[lid_column[region] < 0]
         keep = np.isin(region, region_free)
         lid_column[region_free] = muscles.index(lid.name)
@@ -278,6 +356,11 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
         if lid.levator:
             lid_raise_column[region_free] = muscles.index(lid.levator)
             lid_raise_delta[region_free] = raised[keep]
+        if lid.gaze:
+            columns = [muscles.index(g) for g in lid.gaze]
+            lid_look_column[region_free] = columns
+            lid_look_delta[region_free] = looks[keep]
+            gaze_column[0 if centre[0] > 0 else 1] = columns
         drive_column[contour] = muscles.index(lid.name)
         drive_weight[contour] = 1.0
     # the contact pairs, upper over lower, and the tilt of the plane each part meets across
@@ -288,6 +371,7 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
     normal = np.concatenate([np.zeros((0, 3))] + [np.tile([0.0, np.cos(tilt), -np.sin(tilt)], (len(up), 1))
                                                  for up, _, tilt in parts])
     gap = np.minimum(CONTACT_GAP, np.einsum("kd,kd->k", mesh.vertices[upper] - mesh.vertices[lower], normal))
-    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, seal_column, seal, glide_column, glide, lid_column, lid_centre, lid_delta, lid_raise_column,
-               lid_raise_delta, drive_column, drive_weight,
-               upper, lower, normal, gap)
+    lips = np.arange(len(upper)) < (len(muscles.jaw.upper) if muscles.jaw is not None else 0)  # the jaw's pairs first
+    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, pressure_column, pressure_weight, pressure, seal_column, seal,
+               glide_column, glide, lid_column, lid_centre, lid_delta, lid_raise_column, lid_raise_delta, lid_look_column,
+               lid_look_delta, gaze_column, drive_column, drive_weight, upper, lower, lips, normal, gap)

@@ -45,15 +45,16 @@ def _rig_control(model, control):
     the jaw's glide (Σ activation × ``jaw_glide``), into ``control.target``; w is the
     vertex's jaw weight changed by the lips' seal s, w + s Δw (``jaw_seal``).
     ``control.hold`` is the extra stiffness driving the lips and lid contours,
-    drive * min(1, 10 a) for the activation a of their control (a lid's: the larger of its
-    closure and its raise; the jaw's: the largest of its opening, glides and seal): zero while
-    the jaw and lids are at rest. Then the muscles'
-    ends, from where the bones hold them (``_muscle_geometry``)."""
+    drive * min(1, 10 a) for the activation a of their control (a lid's: the largest of its
+    closure, its raise and its eye's gaze controls; the jaw's: the largest of its opening
+    and glides): zero while the jaw and lids are at rest. The lids follow their eye's
+    gaze: each gaze control g adds g Δ_look (``lid_look_delta``) to the lid's (Δx, Δφ, Δr).
+    Then the muscles' ends, from where the bones hold them (``_muscle_geometry``)."""
     activation = control.activation
     theta = model.jaw_max * activation[model.jaw_column] if model.jaw_column >= 0 else 0.0
     gx = gy = gz = 0.0
     sealed = activation[model.jaw_seal_column] if model.jaw_seal_column >= 0 else 0.0
-    gliding = sealed
+    gliding = 0.0
     for k in range(model.jaw_glide_column.shape[0]):
         if model.jaw_glide_column[k] >= 0:
             g = activation[model.jaw_glide_column[k]]
@@ -65,19 +66,29 @@ def _rig_control(model, control):
         px, py, pz = model.rest_position[i, 0], model.rest_position[i, 1], model.rest_position[i, 2]
         column = model.drive_column[i]
         a = activation[model.lid_raise_column[i]] if model.lid_raise_column[i] >= 0 else 0.0
+        lx = lphi = lr = looking = 0.0
+        for g in range(model.lid_look_column.shape[1]):
+            if model.lid_look_column[i, g] >= 0:
+                look = activation[model.lid_look_column[i, g]]
+                looking = max(looking, look)
+                lx += look * model.lid_look_delta[i, g, 0]
+                lphi += look * model.lid_look_delta[i, g, 1]
+                lr += look * model.lid_look_delta[i, g, 2]
         driving = max(activation[column], a) if column >= 0 else 0.0
         if column >= 0 and column == model.jaw_column:
             driving = max(driving, gliding)
+        elif column >= 0 and column == model.lid_column[i]:
+            driving = max(driving, looking)
         control.hold[i] = model.drive * model.drive_weight[i] * min(1.0, 10.0 * driving)
         if model.lid_column[i] >= 0:
             c = activation[model.lid_column[i]]
             a *= 1.0 - c  # the levator lets go as the lid closes: a blink closes a raised lid
-            if c != 0.0 or a != 0.0:
+            if c != 0.0 or a != 0.0 or looking != 0.0:
                 dy = py - model.lid_centre[i, 1]
                 dz = pz - model.lid_centre[i, 2]
-                phi = math.atan2(dy, dz) + c * model.lid_delta[i, 1] + a * model.lid_raise_delta[i, 1]
-                r = math.sqrt(dy * dy + dz * dz) + c * model.lid_delta[i, 2] + a * model.lid_raise_delta[i, 2]
-                px += c * model.lid_delta[i, 0] + a * model.lid_raise_delta[i, 0]
+                phi = math.atan2(dy, dz) + c * model.lid_delta[i, 1] + a * model.lid_raise_delta[i, 1] + lphi
+                r = math.sqrt(dy * dy + dz * dz) + c * model.lid_delta[i, 2] + a * model.lid_raise_delta[i, 2] + lr
+                px += c * model.lid_delta[i, 0] + a * model.lid_raise_delta[i, 0] + lx
                 py = model.lid_centre[i, 1] + r * math.sin(phi)
                 pz = model.lid_centre[i, 2] + r * math.cos(phi)
         w = model.jaw_weight[i] + sealed * model.jaw_seal[i]

@@ -60,6 +60,7 @@ from . import (
     layout,
     muscle_forces,
     numerics,
+    pressure,
     repulsion,
     rig_control,
     springs,
@@ -100,6 +101,7 @@ def _forces(model, xp, control, work, forces):
     damping._damping_forces(model, forces)  # eq. 3.10
     tissue._tissue_forces(model, xp, control, forces)  # hypodermis, and the rig's drive
     muscle_forces._muscle_forces(model, xp, control, work, forces)  # eq. 3.1-3.4, 3.21-3.25
+    pressure._pressure_forces(model, xp, control, forces)  # air in the mouth on its wall (AU34)
 
 
 @njit(**PARALLEL_OPTIONS)
@@ -132,7 +134,7 @@ def _quasi_implicit_step(model, state, control, h, xp, work, forces):
         for d in range(3):
             v[i, d] = (m * v[i, d] + h * force[i, d] - h * h * k * v[i, d]) / denominator
             x[i, d] += h * v[i, d]  # eq. 3.16
-    contacts._contacts(model, state)
+    contacts._contacts(model, state, control)
 
 
 @njit(**NUMBA_OPTIONS)
@@ -383,7 +385,7 @@ def _implicit_step(model, state, control, h, xp, work, forces, krylov):
     for i in range(x.shape[0]):
         for d in range(3):
             x[i, d] += h * v[i, d]  # eq. 3.16
-    contacts._contacts(model, state)
+    contacts._contacts(model, state, control)
     return iteration
 
 

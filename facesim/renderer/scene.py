@@ -284,13 +284,15 @@ class FaceRenderer:
         GL.glBindBuffer(GL.GL_ARRAY_BUFFER, primitive._buffers[0])
         GL.glBufferSubData(GL.GL_ARRAY_BUFFER, 0, data.nbytes, data)
 
-    def pose(self, head_yaw=0.0, head_pitch=0.0, head_roll=0.0, gaze_yaw=0.0, gaze_pitch=0.0) -> None:
+    def pose(self, head_yaw=0.0, head_pitch=0.0, head_roll=0.0, gaze_yaw=0.0, gaze_pitch=0.0, *look) -> None:
         """Turn the head about the neck and the eyes about their centres (degrees, in the
-        order of facesim.animation.spec.POSE)."""
+        order of facesim.animation.spec.POSE), each eye also by its own ``look`` (the
+        subject's left eye's yaw and pitch, then the right's: facesim.animation.simulate.look_table)."""
         head = rotation(head_yaw, head_pitch, head_roll)
         self._scene.set_pose(self._head, _pose(head, self._neck - head @ self._neck))  # about the neck
         for node, centre in self._eyes:  # the eyeball is built at the origin, pupil along +z
-            self._scene.set_pose(node, _pose(rotation(gaze_yaw, gaze_pitch), centre))
+            own = (0.0, 0.0) if not look else look[0:2] if centre[0] > 0 else look[2:4]
+            self._scene.set_pose(node, _pose(rotation(gaze_yaw + own[0], gaze_pitch + own[1]), centre))
 
     def render(self, positions: np.ndarray, arrows: np.ndarray | None = None, pose=None, jaw=0.0) -> np.ndarray:
         """One frame: positions (n, 3) of the face, optional arrows (n, 3) drawn from
@@ -344,7 +346,7 @@ class FaceRenderer:
             uploads = [(self._face, np.hstack([positions, normals]).astype(np.float32))]
             angles = pose
         else:
-            scene = self._figure.positions(positions, jaw, tuple(pose[3:5]))
+            scene = self._figure.positions(positions, jaw, tuple(pose[3:5]), pose[5:9] if len(pose) > 5 else None)
             uploads = self._figure_arrays(scene, slot)
             positions = scene[self._figure.anchor]
             if self._wire is not None:  # a hair in front of the skin, toward the camera
