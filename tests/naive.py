@@ -209,7 +209,7 @@ def rig_targets(model, activation):
     a = np.where(rig.lid_raise_column >= 0, activation[np.maximum(rig.lid_raise_column, 0)], 0.0)
     look = np.where(rig.lid_look_column >= 0, activation[np.maximum(rig.lid_look_column, 0)], 0.0)  # (n, 4)
     delta = (c[:, None] * rig.lid_delta + (a * (1 - c))[:, None] * rig.lid_raise_delta
-             + np.einsum("ng,ngd->nd", look, rig.lid_look_delta))
+             + (1 - c)[:, None] * np.einsum("ng,ngd->nd", look, rig.lid_look_delta))
     d = p - rig.lid_centre
     phi = np.arctan2(d[:, 1], d[:, 2]) + delta[:, 1]
     r = np.hypot(d[:, 1], d[:, 2]) + delta[:, 2]
@@ -219,7 +219,7 @@ def rig_targets(model, activation):
         w = rig.jaw_weight + activation[rig.jaw_seal_column] * rig.jaw_seal  # the lips' seal changes the weight
         p = rig.jaw_hinge + Rotation.from_rotvec((w * rig.jaw_max * activation[rig.jaw_column])[:, None] * rig.jaw_axis
                                                  ).apply(p - rig.jaw_hinge)
-        p = p + w[:, None] * (activation[rig.jaw_glide_column] @ rig.jaw_glide)
+        p = p + rig.jaw_weight[:, None] * (activation[rig.jaw_glide_column] @ rig.jaw_glide)  # sealed lips glide too
     driven = rig.drive_column >= 0
     a = np.maximum(activation[np.maximum(rig.drive_column, 0)], a)
     if rig.jaw_column >= 0:

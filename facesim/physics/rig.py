@@ -17,7 +17,7 @@ acting on top.
   subject's left or right), so the mandible is a rigid body with translation, not a
   hinge alone. The lips sealed over the open jaw (``lip_seal``, ARKit's mouthClose: the
   orbicularis oris holding the lips together while the jaw drops, as for /p b m/ spoken
-  open) take the weight s w' = w + s Δw, Δw = -w on the lips and the corners, harmonic
+  open) turn with the weight w' = w + s Δw (their glide keeps w), Δw = -w on the lips and the corners, harmonic
   out to zero at the rim and above the hinge: the lower lip stays with the upper one and
   the skin over the chin stretches between it and the jaw (ICT's mouthClose on top of
   jawOpen: the lower lip back up 3.6 cm, the chin's skin less the further down). The weight
@@ -299,16 +299,17 @@ def _eyelid(mesh: FaceMesh, lid, opening: np.ndarray | None, centre: np.ndarray,
     region = np.setdiff1d(np.flatnonzero(distance <= (0.5 + lid.reach) * width), corners)
     s_upper = np.sin(np.pi * np.arange(1, len(lid.upper) + 1) / (len(lid.upper) + 1))  # corner to corner
     s_lower = np.sin(np.pi * np.arange(1, len(lid.lower) + 1) / (len(lid.lower) + 1))
-    # the skin follows the lids' gaze less far than their closing: out to LOOK_REACH eye
-    # widths, the eye corners sliding half as far sideways
+    # the skin follows the lids' gaze less far than their closing, out to LOOK_REACH eye
+    # widths; the eye's corners stay (tied to the orbit by the canthal tendons), so the
+    # lids' slide to a side eases off toward them as sin² πs (as sin πs, the lower lid's
+    # last vertex crossed the inner corner's sliver triangle)
     beyond = np.setdiff1d(np.flatnonzero(distance > (0.5 + LOOK_REACH) * width), np.concatenate([contour, corners]))
     looks = []
     for (up, low), side in zip(LOOK_LIDS + ((0.0, 0.0), (0.0, 0.0)), (0.0, 0.0, LOOK_SIDE, -LOOK_SIDE)):
-        on_upper = np.column_stack([np.full(len(s_upper), side), up * s_upper / upper[:, 2], np.zeros(len(s_upper))])
-        on_lower = np.column_stack([np.full(len(s_lower), side), low * s_lower / lower[:, 2], np.zeros(len(s_lower))])
-        on_corners = np.tile([side / 2, 0.0, 0.0], (len(corners), 1))
+        on_upper = np.column_stack([side * s_upper**2, up * s_upper / upper[:, 2], np.zeros(len(s_upper))])
+        on_lower = np.column_stack([side * s_lower**2, low * s_lower / lower[:, 2], np.zeros(len(s_lower))])
         looks.append(harmonic(mesh, np.concatenate([contour, corners, beyond]),
-                              np.concatenate([on_upper, on_lower, on_corners, np.zeros((len(beyond), 3))]))[region])
+                              np.concatenate([on_upper, on_lower, np.zeros((len(corners) + len(beyond), 3))]))[region])
     return region, delta[region], raised[region], np.stack(looks, axis=1), contour
 
 

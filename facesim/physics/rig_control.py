@@ -42,13 +42,15 @@ def _rig_control(model, control):
     ``control``: its rest position slid over the eyeball by the lid closure c and the
     levator's raise a (c Δ_close + a (1 - c) Δ_raise in cylindrical coordinates about the
     eye's horizontal axis), then turned about the jaw hinge by w θ and carried by w times
-    the jaw's glide (Σ activation × ``jaw_glide``), into ``control.target``; w is the
-    vertex's jaw weight changed by the lips' seal s, w + s Δw (``jaw_seal``).
+    the jaw's glide (Σ activation × ``jaw_glide``), into ``control.target``; the turn's w
+    is the vertex's jaw weight changed by the lips' seal s, w + s Δw (``jaw_seal``), the
+    glide's its weight alone (sealed lips glide with the jaw).
     ``control.hold`` is the extra stiffness driving the lips and lid contours,
     drive * min(1, 10 a) for the activation a of their control (a lid's: the largest of its
     closure, its raise and its eye's gaze controls; the jaw's: the largest of its opening
     and glides): zero while the jaw and lids are at rest. The lids follow their eye's
-    gaze: each gaze control g adds g Δ_look (``lid_look_delta``) to the lid's (Δx, Δφ, Δr).
+    gaze: each gaze control g adds (1 - c) g Δ_look (``lid_look_delta``) to the lid's
+    (Δx, Δφ, Δr), closed lids no longer following it.
     Then the muscles' ends, from where the bones hold them (``_muscle_geometry``)."""
     activation = control.activation
     theta = model.jaw_max * activation[model.jaw_column] if model.jaw_column >= 0 else 0.0
@@ -83,6 +85,7 @@ def _rig_control(model, control):
         if model.lid_column[i] >= 0:
             c = activation[model.lid_column[i]]
             a *= 1.0 - c  # the levator lets go as the lid closes: a blink closes a raised lid
+            lx, lphi, lr = lx * (1.0 - c), lphi * (1.0 - c), lr * (1.0 - c)  # and closed lids no longer follow the gaze
             if c != 0.0 or a != 0.0 or looking != 0.0:
                 dy = py - model.lid_centre[i, 1]
                 dz = pz - model.lid_centre[i, 2]
@@ -95,8 +98,9 @@ def _rig_control(model, control):
         if theta != 0.0 and w > 0.0:
             h, a = model.jaw_hinge, model.jaw_axis
             px, py, pz = _rotate(px, py, pz, h[0], h[1], h[2], a[0], a[1], a[2], w * theta)
-        if gliding != 0.0:
-            px, py, pz = px + w * gx, py + w * gy, pz + w * gz
+        if gliding != 0.0:  # the seal keeps the lips from parting, not from gliding with the jaw
+            g = model.jaw_weight[i]
+            px, py, pz = px + g * gx, py + g * gy, pz + g * gz
         control.target[i, 0] = px
         control.target[i, 1] = py
         control.target[i, 2] = pz
