@@ -198,8 +198,9 @@ def rig_targets(model, activation):
     """Where the jaw and eyelids take each vertex (facesim.physics.rig): the lid closure c and the
     levator's raise a slide a vertex in cylindrical coordinates (x, φ, r) about its eye's
     horizontal axis by c Δ_close + a (1 - c) Δ_raise; then the jaw turns it by its weight w times θ = activation × max
-    angle about the hinge axis and carries it by w times its glide (the glide columns'
-    activations times their glides). And the drive holding the lips and lid contours:
+    angle about the hinge axis, turns the lips drawn to a side about the face's vertical
+    axis, and carries it by w times its glide (the glide columns' activations times their
+    glides). And the drive holding the lips and lid contours:
     drive × weight × min(1, 10 a) for the activation a of their control (the jaw's: its
     largest of opening and glides)."""
     from scipy.spatial.transform import Rotation
@@ -219,11 +220,15 @@ def rig_targets(model, activation):
         w = rig.jaw_weight + activation[rig.jaw_seal_column] * rig.jaw_seal  # the lips' seal changes the weight
         p = rig.jaw_hinge + Rotation.from_rotvec((w * rig.jaw_max * activation[rig.jaw_column])[:, None] * rig.jaw_axis
                                                  ).apply(p - rig.jaw_hinge)
+        slide = rig.lip_shift @ (activation[rig.lip_shift_column] * [1.0, -1.0])  # the lips to one side, cm
+        centre = np.array([model.arrays.axis_x, 0.0, model.arrays.axis_z])  # the face's vertical axis
+        p = centre + Rotation.from_rotvec((slide / model.arrays.radius)[:, None] * [0.0, 1.0, 0.0]).apply(p - centre)
         p = p + rig.jaw_weight[:, None] * (activation[rig.jaw_glide_column] @ rig.jaw_glide)  # sealed lips glide too
     driven = rig.drive_column >= 0
     a = np.maximum(activation[np.maximum(rig.drive_column, 0)], a)
     if rig.jaw_column >= 0:
-        a = np.where(rig.drive_column == rig.jaw_column, np.maximum(a, activation[rig.jaw_glide_column].max()), a)
+        jaw = max(activation[rig.jaw_glide_column].max(), activation[rig.lip_shift_column].max())
+        a = np.where(rig.drive_column == rig.jaw_column, np.maximum(a, jaw), a)
     a = np.where((rig.drive_column >= 0) & (rig.drive_column == rig.lid_column), np.maximum(a, look.max(axis=1)), a)
     hold = np.where(driven, model.material.drive * rig.drive_weight * np.minimum(1.0, 10.0 * a), 0.0)
     return p, hold
@@ -281,16 +286,15 @@ def contacts(model, x, v, activation, target):
     for u, l, n, gap, lips in zip(rig.contact_upper, rig.contact_lower, rig.contact_normal, rig.contact_gap,
                                   rig.contact_lips):
         e = (x[u] - x[l]) - (target[u] - target[l])
-        excess = np.linalg.norm(e) - (gap + (1 - sealed) * 1.0)
+        excess = np.linalg.norm(e) - (max(gap, 0.0) + (1 - sealed) * 1.0)
         if sealed > 0 and lips and excess > 0:
             e = e / np.linalg.norm(e)
             moving = [k for k in (u, l) if not model.pinned[k]]
             for k in moving:
                 x[k] -= (1 if k == u else -1) * excess / len(moving) * e
-            if e @ v[u] > e @ v[l]:
-                mean = (e @ v[u] + e @ v[l]) / 2
-                for k in (u, l):
-                    v[k] += ((mean if not model.pinned[k] else 0.0) - e @ v[k]) * e
+            mean = (e @ v[u] + e @ v[l]) / 2  # held, they move together along e
+            for k in (u, l):
+                v[k] += ((mean if not model.pinned[k] else 0.0) - e @ v[k]) * e
         overlap = gap - n @ (x[u] - x[l])
         if overlap <= 0:
             continue

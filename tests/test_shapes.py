@@ -183,3 +183,32 @@ def test_looking_down_turns_that_eye_and_its_lids_follow():
     assert x[386, 1] - x0[386, 1] < -0.5 and -0.4 < x[374, 1] - x0[374, 1] < 0
     assert x[386, 1] > x[374, 1]
     assert np.abs(x[159] - x0[159]).max() < 0.02 and np.abs(x[145] - x0[145]).max() < 0.02
+
+
+@pytest.mark.parametrize("activations", [
+    {"lip_seal": 1.0}, {"mouth_left": 1.0}, {"mouth_right": 1.0}, {"mouth_left": 1.0, "jaw": 1.0},
+    {"mouth_right": 1.0, "jaw": 1.0}, {"lip_seal": 1.0, "jaw": 1.0}, {"mouth_left": 1.0, "mouth_right": 1.0},
+    {"mouth_left": 1.0, "jaw_sideways_l": 1.0}, {"mouth_left": 1.0, "jaw_sideways_r": 1.0},
+    {"mouth_left": 1.0, "lip_seal": 1.0}, {"mouth_left": 1.0, "cheek_puff_l": 1.0, "cheek_puff_r": 1.0, "lip_seal": 1.0},
+], ids=lambda a: "+".join(a))
+def test_the_shapes_facs_has_no_unit_for_hold_200_frames_without_folding(activations):
+    """ARKit's mouthClose, mouthLeft and mouthRight drive controls, not action units, so
+    the fold sweep over the units (tests/test_folds.py) does not reach them: each alone,
+    with the jaw open, left with right, the lips to a side with the jaw to either side,
+    sealed, and puffed, held 200 frames, inverts no triangle and settles (kinetic energy
+    at the end under 1e-6 of its peak)."""
+    animation = facesim.simulate(Spec.model_validate(dict(name="held", frames=200, onset=10, activations=activations)))
+    assert animation.inverted.max() == 0
+    energy = animation.kinetic_energy
+    assert energy[-1] <= 1e-6 * energy.max() or energy[-1] < 1e-6
+
+
+def test_mouth_left_draws_the_lips_to_the_subjects_left():
+    """mouthLeft: the lips' middles (MediaPipe 13, 14) slide at least 1 cm toward +x, the
+    trailing (right) corner further than the leading one; mouthRight is its mirror."""
+    left = held(activations={"mouth_left": 1.0})
+    d = left.positions[-1] - left.rest
+    assert d[13, 0] > 1.0 and d[14, 0] > 1.0
+    assert d[61, 0] > d[291, 0] > 0
+    right = held(activations={"mouth_right": 1.0})
+    assert right.positions[-1, 13, 0] - right.rest[13, 0] == pytest.approx(-d[13, 0], abs=0.02)

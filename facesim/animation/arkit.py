@@ -47,6 +47,7 @@ _WHOLE = {
     "mouthPucker": "AU18", "mouthShrugLower": "AU17", "mouthShrugUpper": "AU10", "browInnerUp": "AU1",
     # no FACS unit: the lips sealed over the open jaw, a control of the jaw's rig (facesim.physics.rig)
     "mouthClose": "lip_seal",
+    "mouthLeft": "mouth_left", "mouthRight": "mouth_right",
     # the eyes: up and down are FACS's AU63/AU64 per eye; out is toward the eye's own side
     "eyeLookUpLeft": "AU63_L", "eyeLookDownLeft": "AU64_L", "eyeLookOutLeft": "AU61_L", "eyeLookInLeft": "AU62_L",
     "eyeLookUpRight": "AU63_R", "eyeLookDownRight": "AU64_R", "eyeLookOutRight": "AU62_R", "eyeLookInRight": "AU61_R",
@@ -55,7 +56,6 @@ _WHOLE = {
 
 #: Shapes facesim has no anatomy for yet, and what each needs.
 NOT_SIMULATED = {
-    "mouthLeft": "the lips drawn to one side as a whole", "mouthRight": "the lips drawn to one side as a whole",
     "mouthRollLower": "the lower lip rolled in (AU28)", "mouthRollUpper": "the upper lip rolled in (AU28)",
     "tongueOut": "the tongue as a rigged part (AU19)",
     "PupilDilate_L": "the pupil's radius in the renderer", "PupilDilate_R": "the pupil's radius in the renderer",

@@ -33,7 +33,9 @@ def _contacts(model, state, control):
         l = model.contact_lower[k]
         n = model.contact_normal[k]
         if sealed > 0.0 and model.contact_lips[k]:
-            _held_together(x, v, pinned, control.target, u, l, model.contact_gap[k] + (1.0 - sealed) * SEAL_SLACK)
+            # within the gap (none where a pair starts within it: the lips' middle crosses the
+            # tilted plane at rest) and the seal's slack
+            _held_together(x, v, pinned, control.target, u, l, max(model.contact_gap[k], 0.0) + (1.0 - sealed) * SEAL_SLACK)
         overlap = model.contact_gap[k]
         for d in range(3):
             overlap -= n[d] * (x[u, d] - x[l, d])
@@ -60,7 +62,7 @@ def _held_together(x, v, pinned, target, u, l, reach):
     """Pair (u, l) kept within ``reach`` of where the targets put one relative to the
     other: e = (X_u - X_l) - (T_u - T_l) shortened to ``reach`` when longer, each moving
     half the excess along e (a pinned one keeps still), and their velocities along e
-    averaged if they part."""
+    averaged: held, they move together along it."""
     ex = (x[u, 0] - x[l, 0]) - (target[u, 0] - target[l, 0])
     ey = (x[u, 1] - x[l, 1]) - (target[u, 1] - target[l, 1])
     ez = (x[u, 2] - x[l, 2]) - (target[u, 2] - target[l, 2])
@@ -78,8 +80,7 @@ def _held_together(x, v, pinned, target, u, l, reach):
         x[l, d] += share_l * excess * e[d]
         vn_u += e[d] * v[u, d]
         vn_l += e[d] * v[l, d]
-    if vn_u > vn_l:
-        mean = 0.5 * (vn_u + vn_l)
-        for d in range(3):
-            v[u, d] += ((0.0 if pinned[u] else mean) - vn_u) * e[d]
-            v[l, d] += ((0.0 if pinned[l] else mean) - vn_l) * e[d]
+    mean = 0.5 * (vn_u + vn_l)  # held, they move together along e
+    for d in range(3):
+        v[u, d] += ((0.0 if pinned[u] else mean) - vn_u) * e[d]
+        v[l, d] += ((0.0 if pinned[l] else mean) - vn_l) * e[d]

@@ -52,8 +52,11 @@ PUFF_PRESSURE = 1600.0
 #: (MPEG-4 open_jaw, AU26/27), its glide forward (thrust_jaw, AU29) and to either side
 #: (AU30 left and right: one column each, as activations are 0-1), the lips sealed
 #: over it as it opens (ARKit's mouthClose: facesim.physics.rig), and the air pressure
-#: in the mouth it closes, on each cheek (AU34, cheek puff: facesim.physics.pressure).
-JAW_CONTROLS = ("jaw", "jaw_thrust", "jaw_sideways_l", "jaw_sideways_r", "lip_seal", "cheek_puff_l", "cheek_puff_r")
+#: in the mouth it closes, on each cheek (AU34, cheek puff: facesim.physics.pressure),
+#: and the lips drawn as a whole to the subject's left or right (ARKit's mouthLeft and
+#: mouthRight, which FACS has no unit for: facesim.physics.rig).
+JAW_CONTROLS = ("jaw", "jaw_thrust", "jaw_sideways_l", "jaw_sideways_r", "lip_seal", "cheek_puff_l", "cheek_puff_r",
+                "mouth_left", "mouth_right")
 
 
 @dataclass(frozen=True)

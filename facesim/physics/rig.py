@@ -20,7 +20,14 @@ acting on top.
   open) turn with the weight w' = w + s Δw (their glide keeps w), Δw = -w on the lips and the corners, harmonic
   out to zero at the rim and above the hinge: the lower lip stays with the upper one and
   the skin over the chin stretches between it and the jaw (ICT's mouthClose on top of
-  jawOpen: the lower lip back up 3.6 cm, the chin's skin less the further down). The weight
+  jawOpen: the lower lip back up 3.6 cm, the chin's skin less the further down). The lips
+  drawn as a whole to one side (``mouth_left``/``mouth_right``, ARKit's mouthLeft and
+  mouthRight: the modiolus of that side pulling the lips' ring along the teeth) turn
+  about the vertical axis of the cylinder the face wraps around (the muscles' projection,
+  facesim.physics.muscles) by ``lip_shift`` / R, ``LIP_SHIFT`` times a weight 1
+  on the lips and corners and harmonic out to 0 at the rim and ``LIP_SHIFT_REACH`` mouth
+  half-widths: the middle slides across the teeth and back, the trailing corner comes
+  forward, the leading one goes back (as ICT's mouthLeft moves them). The weight
   w is 1 on the lower lip and the rim below the hinge, 0 on the upper lip and above the
   hinge, and harmonic in between (the graph Laplacian's Dirichlet problem), so the opening
   spreads smoothly through the cheeks and the lips part without tearing the corners.
@@ -70,6 +77,14 @@ from .muscles import JAW_CONTROLS, MuscleSet
 #: up, where a pressure along the skin's normal pushes their sides out sideways.
 CAVITY_REACH = (3.0, 1.0)
 CAVITY_CORE = 0.5
+#: How far (cm, along the face) the lips slide at mouth_left or mouth_right 1 (from the
+#: trailing corner to the middle; the leading corner LIP_LEADING of it), and how far
+#: around the mouth the skin follows (mouth half-widths). Against ICT's mouthLeft on the
+#: default head: cosine 0.88, amplitude 0.98 (1.5 cm: 0.87, 0.74; LIP_LEADING 1, the lips
+#: sliding as one, folded the leading corner's slivers).
+LIP_SHIFT = 2.0
+LIP_SHIFT_REACH = 3.0
+LIP_LEADING = 0.45
 #: The lips part as a wedge over this fraction of the mouth's width from each corner.
 JAW_WEDGE = 0.3
 #: The mouth corners follow the jaw by this much of the lower lip's travel (a little less
@@ -119,7 +134,10 @@ class Rig:
 
     jaw_column : activation column of the jaw, -1 without one; jaw_weight : (n,) w;
     jaw_hinge : (3,) a point on the hinge axis; jaw_axis : (3,) its unit direction (+x);
-    jaw_max : θ at activation 1 (radians); pressure_column : (2,) activation columns of
+    jaw_max : θ at activation 1 (radians); lip_shift_column : (2,) activation columns of
+    the lips drawn to the subject's left and right (-1 without a jaw); lip_shift :
+    (n, 2) how far (cm, along the face) each vertex slides with them at 1, to either side;
+    pressure_column : (2,) activation columns of
     the pressure in the mouth on the subject's left and right cheek (-1 without a jaw);
     pressure_weight : (n, 2) each vertex's share of the cavity's wall on either side;
     pressure : the pressure at activation 1, its sign the winding's (outward); jaw_seal_column : activation column of the lips'
@@ -148,6 +166,8 @@ class Rig:
     jaw_hinge: np.ndarray
     jaw_axis: np.ndarray
     jaw_max: float
+    lip_shift_column: np.ndarray
+    lip_shift: np.ndarray
     pressure_column: np.ndarray
     pressure_weight: np.ndarray
     pressure: float
@@ -233,6 +253,31 @@ def _jaw(mesh: FaceMesh, muscles: MuscleSet):
     seal = harmonic(mesh, np.concatenate([lips_and_corners, still]),
                     np.concatenate([-weight[lips_and_corners], np.zeros(len(still))])[:, None])[:, 0]
     return muscles.index("jaw"), weight, hinge[0], axis, jaw.max_angle, corners, np.clip(seal, -weight, 0.0)
+
+
+def _lips_around(mesh: FaceMesh, jaw, corners: np.ndarray) -> np.ndarray:
+    """(n, 2) the lips' share of their turn to the subject's left and to the right: on the
+    mouth opening's loop, its corners and the listed lip points, 1 from the trailing
+    corner to the middle, easing to ``LIP_LEADING`` at the leading corner (the lips bunch
+    there as they slide: ICT's mouthLeft moves its leading corner 0.7 cm, the trailing one
+    1.6), harmonic out to 0 at the rim and beyond ``LIP_SHIFT_REACH`` mouth half-widths
+    from the mouth's centre."""
+    loop = _opening(mesh, jaw.lower)
+    if loop is None:
+        return np.zeros((mesh.vertex_count, 2))
+    x = mesh.vertices
+    lips = np.unique(np.concatenate([loop, corners, jaw.upper, jaw.lower]))
+    centre, half = x[loop].mean(axis=0), np.ptp(x[loop, 0]) / 2
+    far = np.flatnonzero(np.linalg.norm((x - centre)[:, :2], axis=1) > LIP_SHIFT_REACH * half)
+    rim = mesh.boundary_loops[0] if mesh.boundary_loops else np.zeros(0, dtype=np.int64)
+    still = np.setdiff1d(np.union1d(far, rim), lips)
+    out = np.zeros((mesh.vertex_count, 2))
+    for k, toward in enumerate((1.0, -1.0)):  # to the left (+x), to the right
+        ahead = toward * (x[lips, 0] - centre[0]) / half  # -1 at the trailing corner, 1 at the leading one
+        share = 1.0 - (1.0 - LIP_LEADING) * _smoothstep(ahead)
+        values = np.concatenate([share, np.zeros(len(still))])
+        out[:, k] = np.clip(harmonic(mesh, np.concatenate([lips, still]), values[:, None])[:, 0], 0.0, 1.0)
+    return out
 
 
 def _cavity_wall(mesh: FaceMesh, jaw) -> tuple[np.ndarray, float]:
@@ -323,6 +368,8 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
         pressure_column = np.array([muscles.index("cheek_puff_l"), muscles.index("cheek_puff_r")], dtype=np.int64)
         pressure_weight, winding = _cavity_wall(mesh, muscles.jaw)
         pressure = winding * muscles.jaw.puff_pressure
+        lip_shift_column = np.array([muscles.index("mouth_left"), muscles.index("mouth_right")], dtype=np.int64)
+        lip_shift = LIP_SHIFT * _lips_around(mesh, muscles.jaw, corners)
         drive_column[jaw_weight > 0] = jaw_column
         drive_weight[:] = JAW_DRIVE * jaw_weight
         drive_weight[corners] = 1.0
@@ -336,6 +383,7 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
         glide_column, glide = np.full(3, -1, dtype=np.int64), np.zeros((3, 3))
         seal_column, seal = -1, np.zeros(n)
         pressure_column, pressure_weight, pressure = np.full(2, -1, dtype=np.int64), np.zeros((n, 2)), 0.0
+        lip_shift_column, lip_shift = np.full(2, -1, dtype=np.int64), np.zeros((n, 2))
     lid_column = np.full(n, -1, dtype=np.int64)
     lid_centre = np.zeros((n, 3))
     lid_delta = np.zeros((n, 3))
@@ -373,6 +421,6 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
                                                  for up, _, tilt in parts])
     gap = np.minimum(CONTACT_GAP, np.einsum("kd,kd->k", mesh.vertices[upper] - mesh.vertices[lower], normal))
     lips = np.arange(len(upper)) < (len(muscles.jaw.upper) if muscles.jaw is not None else 0)  # the jaw's pairs first
-    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, pressure_column, pressure_weight, pressure, seal_column, seal,
+    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, lip_shift_column, lip_shift, pressure_column, pressure_weight, pressure, seal_column, seal,
                glide_column, glide, lid_column, lid_centre, lid_delta, lid_raise_column, lid_raise_delta, lid_look_column,
                lid_look_delta, gaze_column, drive_column, drive_weight, upper, lower, lips, normal, gap)

@@ -44,7 +44,10 @@ def _rig_control(model, control):
     eye's horizontal axis), then turned about the jaw hinge by w θ and carried by w times
     the jaw's glide (Σ activation × ``jaw_glide``), into ``control.target``; the turn's w
     is the vertex's jaw weight changed by the lips' seal s, w + s Δw (``jaw_seal``), the
-    glide's its weight alone (sealed lips glide with the jaw).
+    glide's its weight alone (sealed lips glide with the jaw). The lips drawn to a side
+    (``lip_shift_column``: a_left, a_right) turn about the vertical axis of the face's
+    cylinder (``axis_x``, ``axis_z``, ``radius``) by (a_left ``lip_shift``[0] - a_right
+    ``lip_shift``[1]) / R, after the jaw's turn.
     ``control.hold`` is the extra stiffness driving the lips and lid contours,
     drive * min(1, 10 a) for the activation a of their control (a lid's: the largest of its
     closure, its raise and its eye's gaze controls; the jaw's: the largest of its opening
@@ -55,6 +58,10 @@ def _rig_control(model, control):
     activation = control.activation
     theta = model.jaw_max * activation[model.jaw_column] if model.jaw_column >= 0 else 0.0
     gx = gy = gz = 0.0
+    to_left = to_right = 0.0  # the lips to one side, turning about the face's vertical axis
+    if model.lip_shift_column[0] >= 0:
+        to_left, to_right = activation[model.lip_shift_column[0]], activation[model.lip_shift_column[1]]
+    shifting = max(to_left, to_right)
     sealed = activation[model.jaw_seal_column] if model.jaw_seal_column >= 0 else 0.0
     gliding = 0.0
     for k in range(model.jaw_glide_column.shape[0]):
@@ -78,7 +85,7 @@ def _rig_control(model, control):
                 lr += look * model.lid_look_delta[i, g, 2]
         driving = max(activation[column], a) if column >= 0 else 0.0
         if column >= 0 and column == model.jaw_column:
-            driving = max(driving, gliding)
+            driving = max(driving, gliding, shifting)
         elif column >= 0 and column == model.lid_column[i]:
             driving = max(driving, looking)
         control.hold[i] = model.drive * model.drive_weight[i] * min(1.0, 10.0 * driving)
@@ -98,6 +105,9 @@ def _rig_control(model, control):
         if theta != 0.0 and w > 0.0:
             h, a = model.jaw_hinge, model.jaw_axis
             px, py, pz = _rotate(px, py, pz, h[0], h[1], h[2], a[0], a[1], a[2], w * theta)
+        slide = to_left * model.lip_shift[i, 0] - to_right * model.lip_shift[i, 1]
+        if slide != 0.0:
+            px, py, pz = _rotate(px, py, pz, model.axis_x, 0.0, model.axis_z, 0.0, 1.0, 0.0, slide / model.radius)
         if gliding != 0.0:  # the seal keeps the lips from parting, not from gliding with the jaw
             g = model.jaw_weight[i]
             px, py, pz = px + g * gx, py + g * gy, pz + g * gz
