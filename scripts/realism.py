@@ -187,7 +187,8 @@ class Table:
                 under = simulated(ON_TOP[row])
                 base = figure.positions(under.positions[last], under.jaw_at(last))
             c = compare((moved - base)[:FACE_AREA], theirs[:FACE_AREA])
-            ok = c.within_bounds and inverted == 0
+            # gaze: the lids' direction alone (issue 46), as tests/test_realism.py holds them
+            ok = (c.cosine >= COSINE if row.startswith("eyeLook") else c.within_bounds) and inverted == 0
             self.passed += ok
             self.rows.append(f"| {row} | {made_of} | {row_control(row)} | {c.cosine:.2f} | {c.amplitude:.2f} | {c.peak:.2f} "
                              f"| {10 * c.ours_peak:.1f} | {10 * c.their_peak:.1f} | {inverted} | {'passes' if ok else 'fails'} |")
@@ -257,8 +258,11 @@ def main() -> int:
         "Each of ICT FaceKit's 57 expression shapes (ARKit's 52 but tongueOut, with cheekRaiser and PupilDilate) "
         "simulated as the control it stands for (`facesim shapes`; facesim.animation.arkit): a side alone "
         "(mouthSmile_L is FACS's AU12_L, the muscles of the subject's left), the jaw's glides (AU29, AU30), "
-        "against ICT's shape for it, measured as above. The pupils' dilation moves nothing on the face area; "
-        "tongueOut has no ICT shape. Atlas: `docs/shape_atlas.png`.\n\n"
+        "against ICT's shape for it, measured as above; mouthClose, which corrects jawOpen, on top of it against "
+        "the same on ICT's. The gaze shapes (eyeLook) are held to the lids' direction alone: their amplitude over "
+        "the face area is the head's follow spreading a lid landmark's motion (at the landmarks, looking up or down "
+        "moves the lids 1.05-1.13 of ICT's), and ICT's eyeballs do not turn. The pupils' dilation moves nothing on "
+        "the face area; tongueOut has no ICT shape. Atlas: `docs/shape_atlas.png`.\n\n"
         f"**{shapes_table.passed} of {len(shapes_table.names)} shapes within the bounds.**\n\n" + shapes_table.table() + "\n"
         "## The same muscles on other faces\n\n"
         "The default head's muscle file carried unchanged (no retuning) to ICT's identities 1-5 (the head's "

@@ -168,7 +168,7 @@ def test_a_cheek_puff_pushes_both_cheeks_out_with_the_lips_sealed():
 def test_looking_down_turns_that_eye_and_its_lids_follow():
     """AU64_L (ARKit's eyeLookDownLeft): the subject's left eyeball turns down (its iris's
     front moves down at least 3 mm) and the right one does not; the left upper lid's
-    middle (MediaPipe 386) comes down with it at least 5 mm, the lower lid (374) a little,
+    middle (MediaPipe 386) comes down with it at least 3 mm, the lower lid (374) a little,
     staying under it; the right lids stay."""
     looked = held(aus={"AU64_L": 1.0})
     figure, head = looked.figure, looked.model.mesh.head
@@ -180,7 +180,7 @@ def test_looking_down_turns_that_eye_and_its_lids_follow():
     assert (moved - rest)[front(left), 1].mean() < -0.3
     assert np.abs(moved - rest)[right].max() < 1e-9
     x, x0 = looked.positions[-1], looked.rest
-    assert x[386, 1] - x0[386, 1] < -0.5 and -0.4 < x[374, 1] - x0[374, 1] < 0
+    assert x[386, 1] - x0[386, 1] < -0.3 and -0.3 < x[374, 1] - x0[374, 1] < 0
     assert x[386, 1] > x[374, 1]
     assert np.abs(x[159] - x0[159]).max() < 0.02 and np.abs(x[145] - x0[145]).max() < 0.02
 

@@ -116,11 +116,12 @@ LID_GAP = 0.02
 LID_THICKNESS = 0.06
 #: How far (cm, at the contour's middle, less toward the corners as sin πs) the upper and
 #: lower lids follow the eye at gaze_up and gaze_down 1: the upper lid rides the cornea's
-#: top, down as far as the eye turns (it covers as much of the iris as looking ahead),
-#: the lower lid its bottom, less; to either side (gaze_left/right) both slide with the
-#: globe by LOOK_SIDE. ICT's eyeLook shapes measure them (the lids' middles: up 3.4 and
-#: 1.6 mm, down 7.4 and 2.0 mm, to the side 2.2 and 2.0 mm).
-LOOK_LIDS = ((0.34, 0.16), (-0.74, -0.20))
+#: top, the lower lid its bottom, less; to either side (gaze_left/right) both slide with
+#: the globe by LOOK_SIDE. ICT's eyeLook shapes move the lids' middles up 3.4 and 1.6 mm,
+#: down 7.4 and 2.0 mm, to the side 2.2 and 2.0 mm, with eyeballs that do not turn; over
+#: facesim's eyeball turned 30 degrees down, 7.4 mm all but closed the lids (the picture
+#: read as eyes shut), 4 mm leaves the iris under the lid as a downward gaze shows it.
+LOOK_LIDS = ((0.34, 0.16), (-0.40, -0.12))
 LOOK_SIDE = 0.21
 #: The skin follows the lids' gaze out to this many eye widths around the opening (their
 #: closing reaches further: an eyelid's ``reach``). Against ICT's eyeLookUp_L at the
