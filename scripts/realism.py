@@ -272,7 +272,7 @@ def main() -> int:
         f"against ICT's displacement at the head's landmarks. Issue 16's bound: at least {OTHER_COSINE}, no "
         "inverted triangle.\n\n"
         + "".join(f"**{name}: {units.other_passed[name] + shapes_table.other_passed[name]} of "
-                  f"{len(units.names) + len(shapes_table.names)}.** " for name, _ in OTHER_FACES) + "\n\n"
+                  f"{len(units.other_rows) + len(shapes_table.other_rows)}.** " for name, _ in OTHER_FACES) + "\n\n"
         "| row | " + " | ".join(name for name, _ in OTHER_FACES) + " |\n"
         "|---|" + "---|" * len(OTHER_FACES) + "\n" + "\n".join(units.other_rows + shapes_table.other_rows) + "\n"
     )
