@@ -212,3 +212,15 @@ def test_mouth_left_draws_the_lips_to_the_subjects_left():
     assert d[61, 0] > d[291, 0] > 0
     right = held(activations={"mouth_right": 1.0})
     assert right.positions[-1, 13, 0] - right.rest[13, 0] == pytest.approx(-d[13, 0], abs=0.02)
+
+
+def test_lips_part_with_the_jaw_still():
+    """AU25 (FACS's lips part): the inner lips' middles (MediaPipe 13, 14) 3-8 mm apart,
+    where they touch at rest; the jaw does not turn (its control stays 0, the lower
+    teeth do not move) and the mouth's corners move under 1 mm."""
+    parted = held(aus={"AU25": 1.0})
+    x, x0 = parted.positions[-1], parted.rest
+    assert 0.3 < np.linalg.norm(x[13] - x[14]) < 0.8 and np.linalg.norm(x0[13] - x0[14]) < 0.05
+    assert not parted.jaw[:, 0].any()
+    assert teeth(parted, parted.frames - 1)[0] == pytest.approx(teeth(parted, 0)[0])
+    assert np.linalg.norm(x[[61, 291]] - x0[[61, 291]], axis=1).max() < 0.1

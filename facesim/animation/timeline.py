@@ -109,6 +109,10 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     # alone moved the skin nearly at right angles to it (cosine 0.34); with 0.4 of the chin
     # raiser's two muscles, weights searched with them (scripts/calibrate.py), 0.81
     "AU24": ("lip pressor", {"mentalis": 0.42, "orbicularis_oris": 0.29, "incisivus_labii_inferioris": 0.34}),
+    # FACS: the lips part by the lower lip's depressor (or the mentalis and the ring
+    # letting go), the jaw still; with a little of the upper lip's raiser the lips' middles
+    # part 4.5 mm and the corners stay (ICT has no shape for it to calibrate against)
+    "AU25": ("lips part", {"depressor_labii_inferioris": 0.5, "levator_labii_superioris": 0.2}),
     "AU26": ("jaw drop", {"jaw": 0.5}),
     "AU27": ("mouth stretch", {"jaw": 1.0}),
     # the condyles glide along the articular eminence (facesim.physics.rig): forward, and
