@@ -279,13 +279,13 @@ def validate(specs: list[Path] = typer.Argument(..., help="spec files")):
 @handled
 def info(mesh: Optional[Path] = MESH, muscles: Optional[Path] = MUSCLES):
     """The face mesh, its muscles, and which OpenGL backends work here."""
-    from .config import DEFAULT_MESH, default_muscles
+    from .config import DEFAULT_MESH, muscles_file
     from .face.loading import load_face
     from .face.muscle_file import load_muscles
     from .physics.muscles import SPHINCTER
     from .renderer.settings import BACKENDS
     mesh_path = mesh or DEFAULT_MESH
-    muscles = muscles or default_muscles(mesh_path)
+    muscles = muscles_file(muscles)
     face = load_face(mesh_path)
     muscle_set = load_muscles(muscles, face)
     cx, cz, radius = face.vertical_axis
@@ -315,7 +315,7 @@ def muscles_command(
     from rich.console import Console
     from rich.table import Table
 
-    from .config import DEFAULT_MESH, default_muscles
+    from .config import DEFAULT_MESH, muscles_file
     from .export.plots import plot_muscles
     from .face.loading import load_face
     from .face.material import face_model
@@ -324,7 +324,7 @@ def muscles_command(
     from .physics.muscles import SPHINCTER
     mesh = mesh or DEFAULT_MESH
     face = load_face(mesh)
-    model = face_model(face, load_muscles(muscles or default_muscles(mesh), face))
+    model = face_model(face, load_muscles(muscles_file(muscles), face))
     regions = muscle_regions(model)
     m = model.muscles
     table = Table(title=f"{model.muscle_count} muscles; controls: {', '.join(m.controls) or 'none'}")
@@ -356,12 +356,12 @@ def shapes(
 
     from .animation.arkit import ARKIT_52, ICT_ALIASES, missing, shape_facs
     from .animation.timeline import ACTION_UNITS, ONE_SIDED, au_muscles
-    from .config import DEFAULT_MESH, default_muscles
+    from .config import DEFAULT_MESH, muscles_file
     from .face.loading import load_face
     from .face.muscle_file import load_muscles
 
     mesh = mesh or DEFAULT_MESH
-    names = load_muscles(muscles or default_muscles(mesh), load_face(mesh)).names
+    names = load_muscles(muscles_file(muscles), load_face(mesh)).names
 
     def drives(unit: str) -> str:
         try:
@@ -506,7 +506,7 @@ def dataset(
 def mesh_info(mesh: Path = typer.Argument(..., help="a mesh file (OBJ, PLY, GLB, ...)")):
     """Vertices, triangles, openings, scale and orientation of a mesh, which muscle file
     fits it, and what is wrong with it. Exit code 1 when something is."""
-    from .config import HOPPER_MESH, HOPPER_MUSCLES
+    from .config import DEFAULT_MUSCLES, HOPPER_MESH
     from .face.loading import diagnose, load_mesh
     face = load_mesh(mesh)
     default = load_mesh(HOPPER_MESH)
@@ -517,7 +517,7 @@ def mesh_info(mesh: Path = typer.Argument(..., help="a mesh file (OBJ, PLY, GLB,
     extent = np.ptp(v, axis=0)
     typer.echo(f"size: {extent[0]:.2f} x {extent[1]:.2f} x {extent[2]:.2f} (x, y, z)")
     same_topology = face.vertex_count == default.vertex_count and np.array_equal(face.edges, default.edges)
-    typer.echo("muscles: " + (f"{HOPPER_MUSCLES} fits by landmark index (MediaPipe topology)" if same_topology else
+    typer.echo("muscles: " + (f"{DEFAULT_MUSCLES} fits by landmark index (MediaPipe topology)" if same_topology else
                               "another topology: name landmarks (`facesim mesh landmarks`), then `facesim mesh align` "
                               "writes it in the face frame with the muscles carried by position"))
     problems = diagnose(face)
@@ -568,13 +568,15 @@ def mesh_align(
     landmarks: Path = typer.Option(..., "--landmarks", help="YAML: landmark name -> vertex index or [x, y, z]"),
     output: Path = typer.Option(..., "-o", "--output", help="OBJ to write, in the Hopper face's frame (cm)"),
     muscles_out: Optional[Path] = typer.Option(None, "--muscles-out", help="muscle file to write (default: OUTPUT with .muscles.yaml)"),
+    muscles: Optional[Path] = typer.Option(None, "--muscles", help="the muscle file to carry, by MediaPipe landmark "
+                                           "index (default: the head's calibrated one; `thesis`: the thesis's)"),
     force: bool = FORCE,
 ):
     """Move, turn and scale a mesh onto the Hopper face (meshes/face.obj) by named landmarks
-    (a similarity fit) and write it with the Hopper face's muscles carried to it by position."""
+    (a similarity fit) and write it with the head's calibrated muscles carried to it by position."""
     import yaml
 
-    from .config import HOPPER_MESH, HOPPER_MUSCLES
+    from .config import HOPPER_MESH, muscles_file
     from .face.align import align, load_landmarks
     from .face.loading import check_face, load_mesh, obj_text
     from .face.muscle_file import MuscleFile, load_muscles, muscles_as_points
@@ -587,11 +589,12 @@ def mesh_align(
     face = load_mesh(mesh)
     default = load_mesh(HOPPER_MESH)
     aligned, residual = align(face, load_landmarks(landmarks, face), default)
-    carried = muscles_as_points(load_model(HOPPER_MUSCLES, MuscleFile), default)
+    source = muscles_file(muscles)
+    carried = muscles_as_points(load_model(source, MuscleFile), default)
     # both files written under temporary names and checked together; renamed only if every muscle snaps
     with atomic_path(output, replace=force) as obj_tmp, atomic_path(muscles_out, replace=force) as muscles_tmp:
         obj_tmp.write_text(obj_text(aligned, header=f"{mesh} aligned to the Hopper face by {landmarks}"))
-        muscles_tmp.write_text(f"# The Hopper face's muscles carried by position to {output.name}.\n"
+        muscles_tmp.write_text(f"# {source.name} carried by position from the Hopper face to {output.name}.\n"
                                + yaml.safe_dump(carried.model_dump(mode="json"), sort_keys=False))
         resolved = load_muscles(muscles_tmp, check_face(load_mesh(obj_tmp), output), source=str(muscles_out))
     typer.echo(f"wrote {output} and {muscles_out}: {resolved.count} muscles; landmark residuals "

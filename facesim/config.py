@@ -219,10 +219,21 @@ HOPPER_MUSCLES = MESHES / "face.muscles.yaml"
 DEFAULT_MESH, DEFAULT_MUSCLES = HEAD, HEAD_MUSCLES
 
 
-def default_muscles(mesh: Path) -> Path:
-    """The muscle file a mesh takes when a spec names none: the head's for a head, the
-    Hopper face's (by MediaPipe landmark index) for any other mesh."""
-    return HEAD_MUSCLES if mesh.suffix == ".npz" else HOPPER_MUSCLES
+#: Muscle files by name, for ``muscles:`` in a spec and ``--muscles``: the head's,
+#: calibrated against ICT FaceKit's scanned shapes (REALISM.md), which every face takes by
+#: default (its points are MediaPipe landmark indices: the head, the Hopper face, any mesh
+#: from `facesim mesh from-photo`; `facesim mesh align` carries it to other topologies by
+#: position), and the thesis's muscle list and forces, for its tables (chapter 4).
+MUSCLE_PRESETS = {"head": HEAD_MUSCLES, "thesis": HOPPER_MUSCLES}
+
+
+def muscles_file(name: str | Path | None) -> Path:
+    """The muscle file a spec or ``--muscles`` names: a preset (MUSCLE_PRESETS), a path,
+    or, for none, the head's calibrated file."""
+    if name is None:
+        return DEFAULT_MUSCLES
+    return MUSCLE_PRESETS.get(str(name), Path(name))
+
 
 #: Below this muscle falloff δ (eq. 3.4) a vertex is outside the region of influence and
 #: the flood fill of section 3.3 does not grow through it.

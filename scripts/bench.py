@@ -59,7 +59,7 @@ def thesis_spec(name: str, solver: str = "quasi-implicit", **changes):
     ``solver`` says otherwise."""
     spec = facesim.load_spec(EXPRESSIONS / f"{name}.yaml")
     material = MaterialSpec.model_validate({**spec.material.model_dump(exclude_unset=True), "preset": "thesis", "solver": solver})
-    return spec.with_overrides(material=material, mesh=HOPPER_MESH, **changes)
+    return spec.with_overrides(material=material, mesh=HOPPER_MESH, **{"muscles": "thesis", **changes})
 
 
 #: Thesis Table 3.1: activated muscles, elapsed seconds for 35 frames, frames per second.

@@ -91,7 +91,8 @@ def test_gif_npz_fps_size_and_cameras(tmp_path):
     assert iio.immeta(tmp_path / "a.gif", index=0)["duration"] == 100
     facesim("render", spec, "-o", tmp_path / "a.npz", check=0)
     data = np.load(tmp_path / "a.npz")
-    assert data["positions"].shape == (12, 468, 3) and data["faces"].shape == (852, 3)
+    assert data["positions"].shape == (12, 26719, 3) and data["faces"].shape == (52220, 3)  # the head, whole
+    assert data["skin_positions"].shape == (12, 468, 3) and data["skin_faces"].shape == (852, 3)
     assert list(data["muscles"]).count("zygomaticus_major_l") == 1
     views = {}
     for camera in ("front", "three-quarter", "profile"):
@@ -129,6 +130,46 @@ def test_wireframe_show_muscles_and_parallel_frames(tmp_path):
     red = (last["arrows"][..., 0] > 150) & (last["arrows"][..., 1] < 80)
     assert red.sum() > 5 and ((last["plain"][..., 0] > 150) & (last["plain"][..., 1] < 80)).sum() == 0
     assert np.array_equal(last["jobs"], last["plain"])  # same frames from two processes
+
+
+def test_the_heads_npz_holds_every_vertex_of_the_head_as_rendered(tmp_path):
+    """Issue 46: `-o x.npz` on the head writes all of ICT's 26,719 vertices per frame in
+    ICT's order (its triangles index them), with the jaw, the eyes and the head's pose
+    applied, and the simulated skin apart; a face mask keeps its own vertices."""
+    from facesim.config import HEAD, HOPPER_MESH
+    from facesim.face.head import load_head
+    head = load_head(HEAD)
+    pose = [{"target": "head_yaw", "keys": [[0, 0], [11, 30]]}, {"target": "gaze_yaw", "keys": [[0, 0], [11, 20]]}]
+    spec = write_spec(tmp_path, aus={"AU26": 1.0}, pose=pose)
+    facesim("render", spec, "-o", tmp_path / "head.npz", check=0)
+    data = np.load(tmp_path / "head.npz")
+    x, skin = data["positions"], data["skin_positions"]
+    assert x.shape == (12, 26719, 3) and x.dtype == np.float32 and np.isfinite(x).all()
+    assert np.array_equal(data["faces"], head.triangles) and np.allclose(data["rest"], head.vertices)
+    neck = head.part("head_neck")
+    assert np.abs(x[0, neck] - head.vertices[neck]).max() < 1e-4  # frame 0: unturned; the skull and neck still
+    # the last frame turned back by the head's yaw about the neck is the unturned head:
+    # the skin's landmarks on it moved as the simulated skin did (within 1 mm) ...
+    from facesim.face.figure import HEAD_NECK
+    from facesim.geometry import rotation
+    unturned = (x[-1] - HEAD_NECK) @ rotation(30.0) + HEAD_NECK
+    moved = unturned[data["skin_on_head"]] - data["rest"][data["skin_on_head"]]
+    lids = np.isin(np.arange(468), [159, 145, 386, 374, 158, 153, 385, 380])  # the lids travel the head's own gap
+    assert np.abs(moved - (skin[-1] - data["skin_rest"]))[~lids].max() < 0.1
+    # ... the lower teeth dropped with the jaw, the upper ones did not move ...
+    teeth = head.part("teeth")
+    drop = unturned[teeth, 1] - data["rest"][teeth, 1]
+    assert drop.min() < -0.5 and np.abs(drop).max() - np.abs(drop.min()) < 1e-6 and (np.abs(drop) < 1e-3).sum() > 100
+    # ... and the eyes turned 20 degrees further than the head: the cornea's apex moved
+    # toward the subject's left (+x), as gaze_yaw turns it, by about sin 20° of the eye's radius
+    for side in ("left", "right"):
+        ball = head.part(f"eyeball_{side}")
+        apex = ball[np.argmax(data["rest"][ball, 2])]
+        assert 0.3 < unturned[apex, 0] - data["rest"][apex, 0] < 0.6
+    mask = write_spec(tmp_path, "mask", mesh=str(HOPPER_MESH))
+    facesim("render", mask, "-o", tmp_path / "mask.npz", check=0)
+    with np.load(tmp_path / "mask.npz") as data:
+        assert data["positions"].shape == (12, 468, 3) and "skin_positions" not in data.files
 
 
 def test_render_a_blend_without_a_spec_file(tmp_path):

@@ -416,7 +416,7 @@ def test_implicit_step_solves_its_system(rng, bending, face):
     with either preconditioner: Jacobi, or the factorised rest system (a skin with bending),
     on the head (its rim tied, nothing pinned) and on the Hopper face (its rim pinned:
     those vertices keep still)."""
-    where = {} if face == "head" else dict(mesh=HOPPER_MESH, muscles=None)
+    where = {} if face == "head" else dict(mesh=HOPPER_MESH, muscles="thesis")
     model = model_for(spec("happy", **where, material=material(tolerance=1e-10, iterations=2000, bending=bending)))
     assert model.pinned.any() == (face == "hopper")
     x, _ = perturbed(model, rng, scale=0.03)

@@ -155,7 +155,7 @@ def test_a_muscle_file_brings_the_material_its_forces_were_set_on_and_a_spec_win
     from facesim.animation.simulate import model_for
     from facesim.config import HOPPER_MESH
     from facesim.face.material import MaterialSpec
-    spec = facesim.load_spec(EXPRESSIONS / "happy.yaml").with_overrides(mesh=HOPPER_MESH)
+    spec = facesim.load_spec(EXPRESSIONS / "happy.yaml").with_overrides(mesh=HOPPER_MESH, muscles="thesis")
     model = model_for(spec)
     assert (model.material.bending, model.material.regions) == (0.0, "moving")
     mine = model_for(spec.with_overrides(material=MaterialSpec(bending=20.0)))

@@ -12,7 +12,7 @@ from test_simulation import assert_expression_reads
 import facesim
 from facesim.animation.simulate import model_for
 from facesim.animation.spec import load_spec
-from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
+from facesim.config import DEFAULT_MUSCLES, HOPPER_MESH, HOPPER_MUSCLES, LIBRARY
 from facesim.face.loading import load_mesh, write_obj
 from facesim.face.material import MaterialSpec, over_muscle_file
 from facesim.face.muscle_file import MuscleFile, muscles_as_points
@@ -20,16 +20,34 @@ from facesim.physics.mesh import subdivide
 from facesim.schema import load_model
 
 
-@pytest.fixture(scope="module")
-def subdivided(tmp_path_factory):
-    """The default face Loop-subdivided once (its first 468 vertices are the originals,
-    smoothed) and the default muscle file carried to it by position."""
-    root = tmp_path_factory.mktemp("sub1")
+def subdivision(root, times, muscles=DEFAULT_MUSCLES):
+    """The Hopper face Loop-subdivided ``times`` (its first 468 vertices are the originals,
+    smoothed) and a muscle file (the default: the head's calibrated one) carried to it by position."""
     base = load_mesh(HOPPER_MESH)
-    write_obj(root / "face.obj", subdivide(base, 1))
-    carried = muscles_as_points(load_model(HOPPER_MUSCLES, MuscleFile), base)
+    write_obj(root / "face.obj", subdivide(base, times))
+    carried = muscles_as_points(load_model(muscles, MuscleFile), base)
     (root / "face.muscles.yaml").write_text(yaml.safe_dump(carried.model_dump(mode="json")))
     return root / "face.obj", root / "face.muscles.yaml"
+
+
+@pytest.fixture(scope="module")
+def subdivided(tmp_path_factory):
+    return subdivision(tmp_path_factory.mktemp("sub1"), 1)
+
+
+@pytest.fixture(scope="module")
+def subdivided_twice(tmp_path_factory):
+    return subdivision(tmp_path_factory.mktemp("sub2"), 2)
+
+
+@pytest.fixture(scope="module")
+def subdivided_thesis(tmp_path_factory):
+    return subdivision(tmp_path_factory.mktemp("sub1_thesis"), 1, HOPPER_MUSCLES)
+
+
+@pytest.fixture(scope="module")
+def astronaut_thesis(astronaut):
+    return astronaut[0], HOPPER_MUSCLES
 
 
 def on(spec, mesh_and_muscles):
@@ -64,14 +82,53 @@ def astronaut(tmp_path_factory):
     root = tmp_path_factory.mktemp("astronaut")
     iio.imwrite(root / "astronaut.png", data.astronaut())
     mesh_from_photo(root / "astronaut.png", root / "astronaut.obj")
-    return root / "astronaut.obj", HOPPER_MUSCLES
+    return root / "astronaut.obj", None  # the default muscle file: the head's, by landmark index
+
+
+@pytest.fixture(scope="module")
+def hopper():
+    return HOPPER_MESH, None
+
+
+def lip_corner_lift(animation) -> float:
+    """How far happy lifts the lip corners (landmarks 61, 291, the first vertices of a
+    Loop subdivision too) at its apex, as a fraction of the mouth's width at rest."""
+    rest, apex = animation.rest, animation.positions[-1]
+    return float((apex[[61, 291], 1] - rest[[61, 291], 1]).mean() / np.linalg.norm(rest[291] - rest[61]))
+
+
+@pytest.mark.parametrize("face", ["hopper", "astronaut", "subdivided", "subdivided_twice"])
+def test_every_face_takes_the_calibrated_muscles_by_default(face, request):
+    """Issue 46: a face given with --mesh (the Hopper face, a mesh from `mesh from-photo`,
+    either Loop-subdivided once or twice with the muscles carried by position) takes the
+    head's calibrated muscles, not the thesis's: happy lifts the lip corners at least 8% of
+    the mouth's width (the thesis's lifted them 3.8% on the Hopper face, and folded the
+    twice-subdivided face at the mouth's inner corners). Measured: 17.6%, 12.4%, 18.3%, 15.8%."""
+    where = request.getfixturevalue(face)
+    spec = on(load_spec(EXPRESSIONS / "happy.yaml"), where)
+    assert spec.muscles_path == (where[1] or DEFAULT_MUSCLES)
+    assert lip_corner_lift(facesim.simulate(spec)) >= 0.08
+    thesis = facesim.simulate(load_spec(EXPRESSIONS / "happy.yaml").with_overrides(mesh=HOPPER_MESH, muscles="thesis"))
+    assert face != "hopper" or lip_corner_lift(thesis) < 0.05  # the preset the thesis's tables name
+
+
+@pytest.mark.parametrize("face", ["hopper", "subdivided", "subdivided_twice"])
+def test_no_library_expression_inverts_a_triangle_on_the_hopper_face_or_its_subdivisions(face, request):
+    """Every spec of the library (blink too, whose lids on a finer mesh have edge vertices
+    between the muscle file's points: held still, they folded at the eye's corners)."""
+    for path in sorted(LIBRARY.glob("*.yaml")):
+        animation = facesim.simulate(on(load_spec(path), request.getfixturevalue(face)))  # raises at an inverted triangle
+        assert animation.inverted.max() == 0, path.stem
 
 
 @pytest.mark.parametrize("name", THESIS_EXPRESSIONS)
-@pytest.mark.parametrize("face", ["astronaut", "subdivided"])
+@pytest.mark.parametrize("face", ["astronaut_thesis", "subdivided_thesis"])
 def test_the_eight_expressions_on_another_face_with_the_same_files(name, face, request):
-    """Same muscle and material files, no inverted triangle, and each expression's check
-    of the simulation tests (with its ablation) on a second face and on a finer mesh."""
+    """The thesis's muscle and material files, no inverted triangle, and each
+    expression's check of the simulation tests (with its ablation, made for the thesis's
+    muscle lists) on a second face and on a finer mesh. (The head's calibrated file, which
+    these faces take by default, is tested above; on the once-subdivided face its
+    corrugators draw fear's brows together 0.2 mm, 0.56 on the Hopper face.)"""
     assert_expression_reads(name, on(load_spec(EXPRESSIONS / f"{name}.yaml"), request.getfixturevalue(face)))
 
 
@@ -86,7 +143,7 @@ def test_a_subdivided_face_moves_like_the_one_it_refines(subdivided, name):
     lip corners, 22% for sad's, 35% for angry's glabella, which the one midline procerus
     pulls over a region the finer mesh resolves differently."""
     spec = load_spec(EXPRESSIONS / f"{name}.yaml")
-    coarse = facesim.simulate(spec.with_overrides(mesh=HOPPER_MESH, muscles=HOPPER_MUSCLES))
+    coarse = facesim.simulate(spec.with_overrides(mesh=HOPPER_MESH))
     fine = facesim.simulate(on(spec, subdivided))
     for v in MOVED[name]:  # Loop subdivision keeps the original vertices first
         a = coarse.positions[-1, v] - coarse.rest[v]
@@ -119,8 +176,13 @@ def test_align_brings_a_turned_scan_in_millimetres_into_the_face_frame(tmp_path,
     from facesim.face.muscle_file import resolve_muscles
     on_aligned = resolve_muscles(carried, aligned)
     on_fine = resolve_muscles(load_model(subdivided[1], MuscleFile), fine)
-    assert np.array_equal(on_aligned.attachment, on_fine.attachment)
-    assert np.array_equal(on_aligned.insertion, on_fine.insertion)
+    # every muscle point snaps to the same vertex or, where two lie almost equally near it
+    # (the smoothed landmark 62 and a new vertex 0.5 mm from it: the fit's residual
+    # decides), to the other, within a millimetre
+    for ends in ("attachment", "insertion"):
+        a, b = getattr(on_aligned, ends), getattr(on_fine, ends)
+        assert np.mean(a == b) >= 0.95
+        assert np.linalg.norm(fine.vertices[a] - fine.vertices[b], axis=1).max() < 0.1
 
 
 def test_landmarks_are_proposed_by_nearest_vertex_on_an_upright_mesh(tmp_path, subdivided):

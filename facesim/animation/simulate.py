@@ -25,6 +25,7 @@ from ..errors import SimulationError
 from ..face.figure import figure_for
 from ..face.head import identity_notice
 from ..face.loading import load_face_model
+from ..geometry import rotation
 from ..physics.model import Model
 from ..physics.muscles import GAZE_ANGLE
 from ..physics.run import Progress, diagnostics, muscle_forces, run
@@ -138,6 +139,16 @@ class Animation:
     def figure(self):
         """The head this animation's face drives (facesim.face.figure), or None for a mask."""
         return None if self.model is None else figure_for(self.model)
+
+    def head_at(self, frame: int) -> np.ndarray:
+        """(N, 3) every vertex of the head at a frame, in ICT FaceKit's order, as the renderer
+        draws it: the figure for the simulated skin, jaw, gaze and each eye's look
+        (facesim.face.figure), turned by the head's pose about the neck."""
+        figure = self.figure
+        pose = np.zeros(5) if self.pose is None else self.pose[frame]
+        x = figure.positions(self.positions[frame], self.jaw_at(frame), (pose[3], pose[4]), pose[5:9] if len(pose) > 5 else None)
+        head = rotation(pose[0], pose[1], pose[2])
+        return (x - figure.neck) @ head.T + figure.neck
 
     @property
     def frames(self) -> int:

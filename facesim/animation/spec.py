@@ -33,7 +33,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, PrivateAttr, ValidationError, field_validator, model_validator
 
-from ..config import DEFAULT_MESH, LIBRARY, default_muscles
+from ..config import DEFAULT_MESH, DEFAULT_MUSCLES, LIBRARY, MUSCLE_PRESETS
 from ..errors import InputError
 from ..face.head import IDENTITY_MODES, identity_problem
 from ..face.material import MaterialSpec
@@ -252,7 +252,11 @@ class Spec(Strict):
     @property
     def muscles_path(self) -> Path:
         face = self.face_directory
-        return self._relative(self.muscles, face.muscles if face else default_muscles(self.mesh_path))
+        if self.muscles is not None and str(self.muscles) in MUSCLE_PRESETS:
+            return MUSCLE_PRESETS[str(self.muscles)]
+        # the thesis's model on a face of its own scale is its skin and its muscles
+        thesis = self.material.preset == "thesis" and self.mesh_path.suffix.lower() != ".npz"
+        return self._relative(self.muscles, face.muscles if face else MUSCLE_PRESETS["thesis"] if thesis else DEFAULT_MUSCLES)
 
     @property
     def face_directory(self):
@@ -275,7 +279,7 @@ class Spec(Strict):
             given = "--identity" if changes.get("identity") is not None else "--mesh"
             raise InputError(f"--face: not with {given}: a face directory brings its own head, identity and muscles")
         for key in ("mesh", "muscles", "face"):
-            if changes.get(key) is not None:
+            if changes.get(key) is not None and str(changes[key]) not in MUSCLE_PRESETS:
                 changes[key] = Path(changes[key]).resolve()
         update = {k: v for k, v in changes.items() if v is not None}
         if "face" in update:

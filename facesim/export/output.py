@@ -14,11 +14,13 @@ import itertools
 import os
 import sys
 import time
+import zipfile
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.lib import format as npy
 
 from ..animation.simulate import Animation
 from ..errors import InputError
@@ -264,15 +266,40 @@ def _verify_npz(frames: int):
 
 
 def write_npz(animation: Animation, path: Path, replace: bool = True) -> None:
+    """The animation's positions and what they mean, as NumPy arrays in an NPZ. On the head,
+    ``positions`` holds every vertex of the head per frame, (frames, 26719, 3) float32 in
+    ICT FaceKit's vertex order, as rendered (the skin, jaw, teeth, tongue, lids, eyes and
+    the head's pose about the neck) with ``faces`` ICT's triangles and ``rest`` its rest
+    shape; the simulated skin is apart (``skin_positions``, ``skin_faces``, ``skin_rest``,
+    and ``skin_on_head``, the head's vertex each skin vertex lies on). The head's frames
+    are written one by one into the archive, never held together. On a face mask,
+    ``positions`` are its own vertices (frames, n, 3)."""
     if animation.streamed:
         raise ValueError("an NPZ holds every frame's positions: simulate without stream")
+    arrays = dict(
+        activations=animation.activations, muscles=np.array(animation.muscle_names), dt=np.array(animation.dt),
+        kinetic_energy=animation.kinetic_energy,
+        pose=np.zeros((animation.frames, 5)) if animation.pose is None else animation.pose,
+    )
+    head = None if animation.figure is None else animation.model.mesh.head
+    if head is None:
+        arrays.update(positions=animation.positions, faces=animation.faces, rest=animation.rest)
+        frames = None
+    else:
+        arrays.update(skin_positions=animation.positions, skin_faces=animation.faces, skin_rest=animation.rest,
+                      skin_on_head=head.landmarks, faces=head.triangles, rest=animation.figure.rest)
+        frames = (animation.head_at(k).astype("<f4") for k in range(animation.frames))
     with atomic_path(path, replace=replace, verify=_verify_npz(animation.frames)) as tmp:
-        np.savez_compressed(
-            tmp, positions=animation.positions, faces=animation.faces, rest=animation.rest,
-            activations=animation.activations, muscles=np.array(animation.muscle_names), dt=animation.dt,
-            kinetic_energy=animation.kinetic_energy,
-            pose=np.zeros((animation.frames, 5)) if animation.pose is None else animation.pose,
-        )
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+            for name, array in arrays.items():
+                with archive.open(f"{name}.npy", "w", force_zip64=True) as member:
+                    npy.write_array(member, np.asanyarray(array), allow_pickle=False)
+            if frames is not None:
+                shape = (animation.frames, len(animation.figure.rest), 3)
+                with archive.open("positions.npy", "w", force_zip64=True) as member:
+                    npy.write_array_header_2_0(member, {"descr": "<f4", "fortran_order": False, "shape": shape})
+                    for frame in frames:
+                        member.write(frame.tobytes())
 
 
 @dataclass

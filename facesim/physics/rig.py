@@ -110,6 +110,9 @@ CONTACT_GAP = 0.01
 #: 1 mm 0.81 (2 mm inverts two triangles).
 LID_MEETING = 0.1
 LID_NASAL = 0.1
+#: Within this distance (cm) of an eye's corner a lid's closing eases off to nothing: the
+#: default faces' lids have no vertex so close (the nearest, 1.15 mm).
+CANTHUS_ROOM = 0.1
 #: Gap left between the closed lid contours (cm): they touch but never cross.
 LID_GAP = 0.02
 #: How far outside the eyeball the closed lid slides (cm): the lid's own thickness.
@@ -315,36 +318,84 @@ def _cylindrical(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
     return np.column_stack([d[:, 0], np.arctan2(d[:, 1], d[:, 2]), np.hypot(d[:, 1], d[:, 2])])
 
 
+def _lid_arcs(mesh: FaceMesh, opening: np.ndarray | None, lid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The upper and lower lid's whole edges, each from the outer corner to the inner
+    (the points the muscle file lists and, on a finer mesh, the opening's vertices between
+    them), and the opening's two corners (the canthi): on each stretch of the loop between
+    an upper and a lower point, its vertex farthest across the eye. Held still as corners,
+    the vertices between a lid's points turned over the triangles between them and their
+    closing neighbours."""
+    if opening is None:
+        return lid.upper, lid.lower, np.zeros(0, dtype=np.int64)
+    side = np.where(np.isin(opening, lid.upper), 1, np.where(np.isin(opening, lid.lower), -1, 0))
+    marked = np.flatnonzero(side)
+    k = np.arange(len(opening))
+    before = marked[np.searchsorted(marked, k, side="right") - 1]  # wraps to the last marked at the start
+    after = marked[np.searchsorted(marked, k) % len(marked)]
+    across = np.abs(mesh.vertices[opening, 0] - mesh.vertices[opening, 0].mean())
+    at = []
+    for start in np.unique(before[(side == 0) & (side[before] != side[after])]):
+        stretch = np.flatnonzero((side == 0) & (before == start))
+        at.append(int(stretch[np.argmax(across[stretch])]))
+    if len(at) != 2:
+        return lid.upper, lid.lower, opening[at]
+    first = int(np.flatnonzero(opening == lid.upper[0])[0])
+    # the corner nearer the lid's first point along the loop is the outer one
+    at.sort(key=lambda c: min((c - first) % len(opening), (first - c) % len(opening)))
+    arcs = []
+    for points in (lid.upper, lid.lower):
+        one = np.roll(opening, -at[0])[1:(at[1] - at[0]) % len(opening)]  # one way round, corner to corner
+        other = np.roll(opening, -at[1])[1:(at[0] - at[1]) % len(opening)][::-1]  # the other way
+        arcs.append(one if np.isin(points, one).sum() > np.isin(points, other).sum() else other)
+    return arcs[0], arcs[1], opening[at]
+
+
+def _along(n: int) -> np.ndarray:
+    """Fractions along a lid's edge of n vertices, corner (0) to corner (1)."""
+    return np.arange(1, n + 1) / (n + 1)
+
+
 def _eyelid(mesh: FaceMesh, lid, opening: np.ndarray | None, centre: np.ndarray, radius: float, width: float):
-    """The contour's (Δx, Δφ, Δr) at full closure, and at the levator's full raise,
-    spread harmonically over the skin within ``reach`` eye widths of the opening.
-    Returns the region, its two deltas, its deltas at each gaze control's 1 (region, 4, 3)
-    and the contour."""
+    """The lids' edges' (Δx, Δφ, Δr) at full closure (each vertex meets the other lid at
+    the same fraction along it), and at the levator's full raise, spread harmonically over
+    the skin within ``reach`` eye widths of the opening. Returns the region, its two
+    deltas, its deltas at each gaze control's 1 (region, 4, 3) and the lids' edges."""
     x = mesh.vertices
-    upper, lower = _cylindrical(x[lid.upper], centre), _cylindrical(x[lid.lower], centre)
-    meet_x = lower[:, 0]
+    edge_upper, edge_lower, corners = _lid_arcs(mesh, opening, lid)
+    s_upper, s_lower = _along(len(edge_upper)), _along(len(edge_lower))
+    upper, lower = _cylindrical(x[edge_upper], centre), _cylindrical(x[edge_lower], centre)
+    lower_at = np.column_stack([np.interp(s_upper, s_lower, lower[:, j]) for j in range(3)])  # below each upper vertex
+    upper_at = np.column_stack([np.interp(s_lower, s_upper, upper[:, j]) for j in range(3)])  # above each lower vertex
     nasal = -np.sign(centre[0]) * LID_NASAL  # toward the face's midline
-    meet_phi = lower[:, 1] + LID_MEETING * (upper[:, 1] - lower[:, 1])
-    over_ball = np.sqrt(np.maximum(radius**2 - meet_x**2, 0.0)) + LID_THICKNESS
-    meet_r = np.maximum((upper[:, 2] + lower[:, 2]) / 2, over_ball)
-    half_gap = LID_GAP / 2 / meet_r
-    delta_upper = np.column_stack([meet_x - upper[:, 0], meet_phi + half_gap - upper[:, 1], meet_r - upper[:, 2]])
-    delta_lower = np.column_stack([np.full(len(lower), nasal), meet_phi - half_gap - lower[:, 1], meet_r - lower[:, 2]])
-    contour = np.concatenate([lid.upper, lid.lower])
+
+    def meeting(up, low):
+        phi = low[:, 1] + LID_MEETING * (up[:, 1] - low[:, 1])
+        over_ball = np.sqrt(np.maximum(radius**2 - low[:, 0] ** 2, 0.0)) + LID_THICKNESS
+        r = np.maximum((up[:, 2] + low[:, 2]) / 2, over_ball)
+        return low[:, 0], phi, r, LID_GAP / 2 / r
+
+    mx, mphi, mr, half_gap = meeting(upper, lower_at)
+    delta_upper = np.column_stack([mx - upper[:, 0], mphi + half_gap - upper[:, 1], mr - upper[:, 2]])
+    _, mphi, mr, half_gap = meeting(upper_at, lower)
+    delta_lower = np.column_stack([np.full(len(lower), nasal), mphi - half_gap - lower[:, 1], mr - lower[:, 2]])
+    # within CANTHUS_ROOM of a corner, where the canthal tendons hold the lids, the closing
+    # eases off (a finer mesh has edge vertices there, which crossed the corner)
+    if len(corners):
+        for edge, d in ((edge_upper, delta_upper), (edge_lower, delta_lower)):
+            near = np.linalg.norm(x[edge][:, None] - x[corners][None], axis=2).min(axis=1)
+            d *= np.clip(near / CANTHUS_ROOM, 0.0, 1.0)[:, None]
+    contour = np.concatenate([edge_upper, edge_lower])
     distance = np.linalg.norm((x - centre)[:, :2], axis=1)
     outside = np.flatnonzero(distance > (0.5 + lid.reach) * width)
-    corners = np.setdiff1d(opening, contour) if opening is not None else np.zeros(0, dtype=np.int64)
     fixed = np.concatenate([contour, corners, np.setdiff1d(outside, contour)])
     still = np.zeros((len(fixed) - len(contour), 3))  # the eye corners and the skin beyond reach
     delta = harmonic(mesh, fixed, np.concatenate([delta_upper, delta_lower, still]))
     raised = np.zeros_like(delta)
     if lid.levator:
-        s = np.arange(1, len(lid.upper) + 1) / (len(lid.upper) + 1)  # along the upper lid, corner to corner
-        raise_upper = np.column_stack([np.zeros_like(s), lid.levator_angle * np.sin(np.pi * s), np.zeros_like(s)])
+        raise_upper = np.column_stack([np.zeros_like(s_upper), lid.levator_angle * np.sin(np.pi * s_upper), np.zeros_like(s_upper)])
         raised = harmonic(mesh, fixed, np.concatenate([raise_upper, np.zeros_like(delta_lower), still]))
     region = np.setdiff1d(np.flatnonzero(distance <= (0.5 + lid.reach) * width), corners)
-    s_upper = np.sin(np.pi * np.arange(1, len(lid.upper) + 1) / (len(lid.upper) + 1))  # corner to corner
-    s_lower = np.sin(np.pi * np.arange(1, len(lid.lower) + 1) / (len(lid.lower) + 1))
+    sin_upper, sin_lower = np.sin(np.pi * s_upper), np.sin(np.pi * s_lower)
     # the skin follows the lids' gaze less far than their closing, out to LOOK_REACH eye
     # widths; the eye's corners stay (tied to the orbit by the canthal tendons), so the
     # lids' slide to a side eases off toward them as sin² πs (as sin πs, the lower lid's
@@ -352,8 +403,8 @@ def _eyelid(mesh: FaceMesh, lid, opening: np.ndarray | None, centre: np.ndarray,
     beyond = np.setdiff1d(np.flatnonzero(distance > (0.5 + LOOK_REACH) * width), np.concatenate([contour, corners]))
     looks = []
     for (up, low), side in zip(LOOK_LIDS + ((0.0, 0.0), (0.0, 0.0)), (0.0, 0.0, LOOK_SIDE, -LOOK_SIDE)):
-        on_upper = np.column_stack([side * s_upper**2, up * s_upper / upper[:, 2], np.zeros(len(s_upper))])
-        on_lower = np.column_stack([side * s_lower**2, low * s_lower / lower[:, 2], np.zeros(len(s_lower))])
+        on_upper = np.column_stack([side * sin_upper**2, up * sin_upper / upper[:, 2], np.zeros(len(sin_upper))])
+        on_lower = np.column_stack([side * sin_lower**2, low * sin_lower / lower[:, 2], np.zeros(len(sin_lower))])
         looks.append(harmonic(mesh, np.concatenate([contour, corners, beyond]),
                               np.concatenate([on_upper, on_lower, np.zeros((len(corners) + len(beyond), 3))]))[region])
     return region, delta[region], raised[region], np.stack(looks, axis=1), contour
@@ -397,7 +448,7 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
         opening = _opening(mesh, lid.upper)
         points = mesh.vertices[opening if opening is not None else np.concatenate([lid.upper, lid.lower])]
         centre, radius = eyeball(points)
-        region, delta, raised, looks, contour = _eyelid(mesh, lid, opening, centre, radius, float(np.ptp(points[:, 0])))
+        region, delta, raised, looks, edge = _eyelid(mesh, lid, opening, centre, radius, float(np.ptp(points[:, 0])))
         region_free = region[lid_column[region] < 0]
         keep = np.isin(region, region_free)
         lid_column[region_free] = muscles.index(lid.name)
@@ -411,8 +462,8 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
             lid_look_column[region_free] = columns
             lid_look_delta[region_free] = looks[keep]
             gaze_column[0 if centre[0] > 0 else 1] = columns
-        drive_column[contour] = muscles.index(lid.name)
-        drive_weight[contour] = 1.0
+        drive_column[edge] = muscles.index(lid.name)
+        drive_weight[edge] = 1.0
     # the contact pairs, upper over lower, and the tilt of the plane each part meets across
     parts = [(muscles.jaw.upper, muscles.jaw.lower, muscles.jaw.contact_tilt)] if muscles.jaw is not None else []
     parts += [(lid.upper, lid.lower, 0.0) for lid in muscles.eyelids]
