@@ -359,11 +359,16 @@ def shapes(
     from .config import DEFAULT_MESH, muscles_file
     from .face.loading import load_face
     from .face.muscle_file import load_muscles
+    from .physics.muscles import JAW_CONTROLS, PUPIL
 
     mesh = mesh or DEFAULT_MESH
     names = load_muscles(muscles_file(muscles), load_face(mesh)).names
 
     def drives(unit: str) -> str:
+        if unit in names:  # a control FACS has no unit for
+            return ("the control: the pupil's radius, drawn by the renderer" if unit.startswith(PUPIL) else
+                    "the control: the jaw's rig (the mandible, the lips, the mouth's air)" if unit in JAW_CONTROLS else
+                    "the control")
         try:
             return ", ".join(f"{m} {w:g}" if w != 1 else m for m, w in au_muscles(unit, names).items())
         except ValueError as exc:

@@ -141,7 +141,8 @@ def draw_atlas(panels: list[tuple[str, str, np.ndarray | None, np.ndarray]], pat
 
 def write_calibration_data(shapes, path: Path) -> None:
     """ICT's 57 expression shapes over the head's face area, as ICT ships them (float16
-    deltas, the same names and order), and the default head's landmark vertices (what
+    deltas, the same names and order), PupilDilate_L/_R over the irises' vertices they
+    move (``pupil_rows``, ``pupil_deltas``), and the default head's landmark vertices (what
     scripts/calibrate.py fits the simulated vertices at): every row of the table is a sum
     of these (facesim.animation.calibration.ict_displacement)."""
     from facesim.config import HEAD
@@ -151,9 +152,15 @@ def write_calibration_data(shapes, path: Path) -> None:
     names = [str(n) for n in shapes["expression_names"]]
     assert names == list(ICT_EXPRESSIONS), "ICT's shapes are not the ones facesim's table names"
     path.parent.mkdir(parents=True, exist_ok=True)
+    # the pupils' dilation moves nothing on the face: its shapes over the irises it moves
+    iris = np.unique(np.concatenate([head.triangles_of(f"M_Iris{side}").ravel() for side in ("Left", "Right")]))
+    pupil = np.array([names.index(f"PupilDilate_{side}") for side in "LR"])
+    deltas = shapes["expression_deltas"][pupil][:, iris].astype(np.float64)
+    rows = iris[(np.linalg.norm(deltas, axis=2) > 1e-6).any(axis=0)]
     np.savez_compressed(path, expression_names=np.array(names), landmark_vertex=head.landmarks,
-                        expression_deltas=np.asarray(shapes["expression_deltas"][:, :FACE_AREA], dtype=np.float16))
-    print(f"wrote {path}: {len(names)} shapes over {FACE_AREA} face vertices")
+                        expression_deltas=np.asarray(shapes["expression_deltas"][:, :FACE_AREA], dtype=np.float16),
+                        pupil_rows=rows, pupil_deltas=np.asarray(shapes["expression_deltas"][pupil][:, rows], dtype=np.float16))
+    print(f"wrote {path}: {len(names)} shapes over {FACE_AREA} face vertices, the pupils' over {len(rows)} iris vertices")
 
 
 class Table:
@@ -171,7 +178,8 @@ class Table:
             theirs = ict_displacement(shapes, row) if row in ICT_ROWS else None
             made_of = " + ".join(ICT_ROWS[row]) if row in ICT_ROWS else "(no ICT shape)"
             animation = simulated(row)
-            if animation is None or theirs is None or not np.abs(theirs[:FACE_AREA]).max() > 0:
+            iris = animation is not None and row.startswith("PupilDilate")  # the irises alone: compared over them
+            if not iris and (animation is None or theirs is None or not np.abs(theirs[:FACE_AREA]).max() > 0):
                 why = "not simulated yet" if animation is None else "nothing on the face area" if theirs is not None else "no ICT shape"
                 control = "" if animation is None else row_control(row)
                 self.rows.append(f"| {row} | {made_of} | {control} | {why} | | | | | | |")
@@ -180,13 +188,14 @@ class Table:
                 continue
             figure = animation.figure
             last = animation.frames - 1
-            moved = figure.positions(animation.positions[last], animation.jaw_at(last))
+            moved = animation.head_at(last) if iris else figure.positions(animation.positions[last], animation.jaw_at(last))
             inverted = int(animation.inverted.max())
             base = figure.rest
             if row in ON_TOP:  # a correction: compared as the difference from its base, drawn on top of it
                 under = simulated(ON_TOP[row])
                 base = figure.positions(under.positions[last], under.jaw_at(last))
-            c = compare((moved - base)[:FACE_AREA], theirs[:FACE_AREA])
+            area = np.unique(np.concatenate([figure.pupils[0].rows, figure.pupils[1].rows])) if iris else slice(FACE_AREA)
+            c = compare((moved - base)[area], theirs[area])
             # gaze: the lids' direction alone (issue 46), as tests/test_realism.py holds them
             ok = (c.cosine >= COSINE if row.startswith("eyeLook") else c.within_bounds) and inverted == 0
             self.passed += ok
@@ -203,7 +212,7 @@ class Table:
                                 crop(renderer.render_figure(moved)), drawn, theirs))
         self.other_rows, self.other_passed = [], {name: 0 for name, _ in OTHER_FACES}
         for row, _, ours, _, theirs in self.panels:
-            if ours is None:
+            if ours is None or row.startswith("PupilDilate"):  # the same rig on every face, nothing on its skin
                 continue
             cells = []
             for name, face in OTHER_FACES:

@@ -118,9 +118,9 @@ def test_a_second_photo_gives_a_valid_mesh_that_carries_the_default_muscles(tmp_
     assert (loaded.face_normals[:, 2] > 0).mean() >= 0.95
     assert np.abs(loaded.vertices - mesh.vertices).max() < 1e-5
     muscles = load_muscles(HOPPER_MUSCLES, loaded)
-    from facesim.physics.muscles import GAZE, JAW_CONTROLS
+    from facesim.physics.muscles import GAZE, JAW_CONTROLS, PUPIL
 
-    lids = [(f"eyelid_{s}", f"levator_palpebrae_{s}", *(f"{g}_{s}" for g in GAZE)) for s in "rl"]
+    lids = [(f"eyelid_{s}", f"levator_palpebrae_{s}", *(f"{g}_{s}" for g in GAZE), f"{PUPIL}_{s}") for s in "rl"]
     assert muscles.count == 40 and muscles.controls == (*JAW_CONTROLS, *lids[0], *lids[1])
 
 

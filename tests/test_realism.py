@@ -96,6 +96,26 @@ def test_each_unit_and_shape_matches_icts_scanned_shape(row, ict, head_model, he
     assert held.inverted == 0, f"{row} ({unit}): {held.inverted} inverted triangles"
 
 
+@pytest.mark.parametrize("side", ["L", "R"])
+def test_a_pupil_dilates_as_icts_pupildilate(side, head_model, head_figure):
+    """ICT's PupilDilate moves an eye's iris alone (nothing on the face area): the
+    renderer's pupil control (``pupil_dilate_l``/``_r``) at 1, against ICT's shape over
+    the irises' vertices it moves, within the bounds of every other row, the other eye still."""
+    from facesim.animation.arkit import shape_facs
+    data = np.load(DATA)
+    rows, theirs = data["pupil_rows"], data["pupil_deltas"][0 if side == "L" else 1].astype(np.float64)
+    control = shape_facs(f"PupilDilate_{side}")
+    assert control in head_model.muscles.names
+    still = head_figure.positions(head_model.rest_position)
+    look = np.zeros(6)
+    look[4 if side == "L" else 5] = 1.0
+    ours = head_figure.positions(head_model.rest_position, look=look)[rows] - still[rows]
+    c = compare(ours, theirs)
+    assert c.cosine >= COSINE and AMPLITUDE[0] <= c.amplitude <= AMPLITUDE[1], f"cosine {c.cosine:.2f}, amplitude {c.amplitude:.2f}"
+    other = np.linalg.norm(theirs, axis=1) < 1e-6  # ICT's other eye
+    assert np.abs(ours[other]).max() == 0.0
+
+
 PAIRS = [(r, r[:-2] + "_R") for r in ICT_EXPRESSIONS if r.endswith("_L") and r not in OFF_FACE] + [
     ("jawLeft", "jawRight"), ("mouthLeft", "mouthRight")]
 

@@ -75,6 +75,27 @@ def test_facesim_shapes_lists_every_name_with_what_drives_it():
     assert "zygomaticus_major_l" in out and "jaw_sideways_l" in out and "lip_seal" in out
     assert "not simulated yet: needs the tongue as a rigged part" in out
     assert "AU30 (_L/_R)" in out and "AU29" in out
+    assert "not on this face" not in out  # every control the default head has (lip_seal, pupil_dilate_l, ...)
+    assert "PupilDilate_L" in out and "pupil's radius" in out
+
+
+def test_a_pupil_dilates_on_its_own_side_and_the_npz_shows_it(tmp_path):
+    """ICT's PupilDilate_R, the subject's right pupil alone (the renderer's control,
+    ``pupil_dilate_r``): its iris slides outward in the head's NPZ, the other eye and the
+    skin stay (tests/test_realism.py compares it with ICT's shape)."""
+    from facesim.config import HEAD
+    from facesim.face.head import load_head
+    path = tmp_path / "pupil.yaml"
+    path.write_text("frames: 8\nonset: 2\narkit: {PupilDilate_R: 0.6}\n")
+    result = subprocess.run([sys.executable, "-m", "facesim", "render", str(path), "-o", str(tmp_path / "p.npz")],
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    head = load_head(HEAD)
+    with np.load(tmp_path / "p.npz") as data:
+        moved = np.linalg.norm(data["positions"][-1] - data["rest"], axis=1)
+        assert np.abs(data["skin_positions"][-1] - data["skin_rest"]).max() < 1e-6
+    right, left = head.part("eyeball_right"), head.part("eyeball_left")
+    assert moved[right].max() > 0.15 and moved[left].max() == 0.0
 
 
 def held(aus=None, activations=None, frames=40):

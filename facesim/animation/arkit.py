@@ -19,6 +19,8 @@ yet name what is missing (``NOT_SIMULATED``) and are refused, never silently dro
 
 from __future__ import annotations
 
+from ..physics.muscles import PUPIL
+
 #: ARKit's 52 blendshapes, Apple's spelling, in the order of Live Link Face's CSV.
 ARKIT_52 = (
     "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft", "eyeSquintLeft", "eyeWideLeft",
@@ -58,7 +60,6 @@ _WHOLE = {
 NOT_SIMULATED = {
     "mouthRollLower": "the lower lip rolled in (AU28)", "mouthRollUpper": "the upper lip rolled in (AU28)",
     "tongueOut": "the tongue as a rigged part (AU19)",
-    "PupilDilate_L": "the pupil's radius in the renderer", "PupilDilate_R": "the pupil's radius in the renderer",
 }
 
 
@@ -81,7 +82,8 @@ ICT_ALIASES = {
     "browInnerUp_L": "AU1_L", "browInnerUp_R": "AU1_R",
     "cheekRaiser_L": "AU6_L", "cheekRaiser_R": "AU6_R",
     "cheekPuff_L": "AU34_L", "cheekPuff_R": "AU34_R",
-    "PupilDilate_L": "PupilDilate_L", "PupilDilate_R": "PupilDilate_R",
+    # ICT's, not ARKit's: each pupil's dilation, a control drawn by the renderer
+    "PupilDilate_L": f"{PUPIL}_l", "PupilDilate_R": f"{PUPIL}_r",
     **{name: name for name in ("jawForward", "jawLeft", "jawRight", "jawOpen", "mouthClose", "mouthFunnel", "mouthPucker",
                                "mouthLeft", "mouthRight", "mouthRollLower", "mouthRollUpper", "mouthShrugLower",
                                "mouthShrugUpper")},
@@ -101,7 +103,7 @@ def shape_facs(name: str) -> str:
     it drives where FACS has no unit for it (``lip_seal``); ValueError for an unknown
     name or a shape facesim does not simulate yet."""
     arkit = ICT_ALIASES.get(name, name)
-    if arkit.startswith("AU"):
+    if arkit.startswith(("AU", PUPIL)):
         return arkit
     if missing(name):
         raise ValueError(f"{name} is not simulated yet (it needs {missing(name)})")

@@ -27,7 +27,7 @@ from ..face.head import identity_notice
 from ..face.loading import load_face_model
 from ..geometry import rotation
 from ..physics.model import Model
-from ..physics.muscles import GAZE_ANGLE
+from ..physics.muscles import GAZE_ANGLE, PUPIL
 from ..physics.run import Progress, diagnostics, muscle_forces, run
 from ..physics.twins import on_threads
 from ..timings import phase
@@ -146,7 +146,7 @@ class Animation:
         (facesim.face.figure), turned by the head's pose about the neck."""
         figure = self.figure
         pose = np.zeros(5) if self.pose is None else self.pose[frame]
-        x = figure.positions(self.positions[frame], self.jaw_at(frame), (pose[3], pose[4]), pose[5:9] if len(pose) > 5 else None)
+        x = figure.positions(self.positions[frame], self.jaw_at(frame), (pose[3], pose[4]), pose[5:] if len(pose) > 5 else None)
         head = rotation(pose[0], pose[1], pose[2])
         return (x - figure.neck) @ head.T + figure.neck
 
@@ -197,23 +197,27 @@ def check_moved(model: Model, table: np.ndarray, moved: float, source: str) -> N
 
 def _posed(pose: np.ndarray | None, look: np.ndarray | None) -> np.ndarray | None:
     """The pose table (frames, 5), with each eye's turn from the gaze controls after it
-    (frames, 9) when they act."""
+    (frames, 11) when they act."""
     if look is None:
         return pose
     return np.column_stack([np.zeros((len(look), 5)) if pose is None else pose, look])
 
 
 def look_table(model: Model, table: np.ndarray) -> np.ndarray | None:
-    """(frames, 4) each eye's turn in degrees from the gaze controls (yaw toward the
+    """(frames, 6) each eye's turn in degrees from the gaze controls (yaw toward the
     subject's left, pitch up; the subject's left eye, then the right), their activations
-    times ``GAZE_ANGLE``: what the renderer turns the eyeballs by, on top of the pose's
-    gaze; None when no gaze control acts."""
+    times ``GAZE_ANGLE``, then each pupil's dilation (0-1, left, right): what the
+    renderer turns the eyeballs by, on top of the pose's gaze, and opens the pupils by;
+    None when no gaze or pupil control acts."""
     columns = model.rig.gaze_column
-    look = np.zeros((len(table), 4))
+    look = np.zeros((len(table), 6))
     for eye in range(2):
         if columns[eye, 0] >= 0:
             up, down, left, right = (table[:, columns[eye, g]] * GAZE_ANGLE[g] for g in range(4))
             look[:, 2 * eye], look[:, 2 * eye + 1] = left - right, up - down
+    for eye, side in enumerate("lr"):
+        if f"{PUPIL}_{side}" in model.muscles.names:
+            look[:, 4 + eye] = np.clip(table[:, model.muscles.index(f"{PUPIL}_{side}")], 0.0, 1.0)
     return look if look.any() else None
 
 

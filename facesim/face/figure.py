@@ -60,6 +60,12 @@ LASH_ALPHA, LASH_LENGTH = (0.9, 0.35), (0.7, 0.4)
 #: Pupil and iris radii (cm), and the width of the iris's darker limbal ring: an adult
 #: iris is about 11.7 mm across.
 PUPIL_RADIUS, IRIS_RADIUS, LIMBUS = 0.2, 0.585, 0.1
+#: The pupil dilates (ICT's PupilDilate, a control per eye: ``pupil_dilate_l``/``_r``) as
+#: the iris's dilator draws the iris back toward its root: each iris vertex within
+#: DILATING of the axis slides outward over the iris's surface, a fraction (the control)
+#: of the way to PUPIL_OPEN, where ICT's fully dilated iris lies (its inner rim moves
+#: from 0.12 to 0.55-0.62 cm from the axis, 0.575 on average).
+DILATING, PUPIL_OPEN = 0.55, 0.575
 
 
 @dataclass(frozen=True)
@@ -71,13 +77,49 @@ class Part:
 
 
 @dataclass(frozen=True)
+class Pupil:
+    """An eye's iris vertices within DILATING of its optical axis (rows), each's outward
+    direction (k, 3) and distance from the axis (k,), and the iris's surface as heights
+    along the axis over distances from it (sorted), which a vertex sliding outward follows."""
+
+    rows: np.ndarray
+    centre: np.ndarray
+    axis: np.ndarray
+    outward: np.ndarray
+    radius: np.ndarray
+    surface_radius: np.ndarray
+    surface_height: np.ndarray
+
+    def dilated(self, opening: float) -> np.ndarray:
+        """(k, 3) the rows' displacement with the pupil dilated by ``opening`` (0-1)."""
+        moved = self.radius + opening * (PUPIL_OPEN - self.radius)
+        height = np.interp(moved, self.surface_radius, self.surface_height)
+        rise = height - np.interp(self.radius, self.surface_radius, self.surface_height)
+        return self.outward * (moved - self.radius)[:, None] + rise[:, None] * self.axis
+
+
+def _pupil(x: np.ndarray, head: Head, side: str) -> Pupil:
+    centre, axis, iris = _iris_axis(x, head, side)
+    d = x[iris] - centre
+    height = d @ axis
+    across = d - height[:, None] * axis
+    radius = np.linalg.norm(across, axis=1)
+    front = height > 0
+    order = np.argsort(radius[front])
+    rows = front & (radius < DILATING) & (radius > 0)
+    return Pupil(iris[rows], centre, axis, across[rows] / radius[rows, None], radius[rows],
+                 radius[front][order], height[front][order])
+
+
+@dataclass(frozen=True)
 class Figure:
     """rest : (N, 3); colour : (N, 4); sim_rest : (n, 3) the simulation mesh at rest;
     anchor : (n,) the figure vertex where each simulated vertex shows (muscle arrows);
     follow_rows : (k,), follow : (k, n) sparse displacement weights (shared by every identity),
     follow_gain : (n,) each simulated vertex's displacement scaled by it first; jaw_rows, jaw_weight : (j,);
     jaw_hinge, jaw_axis : (3,); eyes : (rows, centre) per eyeball; guards : (rows,
-    centre, radius) per eye, skin kept outside it; neck : (3,) the head's pivot."""
+    centre, radius) per eye, skin kept outside it; neck : (3,) the head's pivot; pupils :
+    per eye, ``Pupil``: the iris vertices a dilating pupil moves."""
 
     rest: np.ndarray
     colour: np.ndarray
@@ -94,6 +136,7 @@ class Figure:
     eyes: tuple
     guards: tuple
     neck: np.ndarray
+    pupils: tuple = ()
 
     @property
     def triangles(self) -> np.ndarray:
@@ -103,7 +146,8 @@ class Figure:
         """(N, 3): the figure for simulated positions ``sim`` (n, 3), the jaw (its angle
         in radians, or (4,): the angle and its glide in cm, as Animation.jaw), the gaze
         (yaw, pitch in degrees) and each eye's own turn on top of it (``look``, (4,): the
-        subject's left eye's yaw and pitch, then the right's; facesim.animation.simulate.look_table)."""
+        subject's left eye's yaw and pitch, then the right's, then each pupil's dilation,
+        0-1, left and right; facesim.animation.simulate.look_table)."""
         jaw = np.atleast_1d(np.asarray(jaw, dtype=np.float64))
         jaw_angle, glide = jaw[0], jaw[1:4]
         x = np.empty_like(self.rest)
@@ -116,6 +160,11 @@ class Figure:
             x[self.jaw_rows] += self.jaw_weight[:, None] * (turned - rest)
         if glide.any() and len(self.jaw_rows):
             x[self.jaw_rows] += self.jaw_weight[:, None] * glide
+        if look is not None and len(look) > 4:
+            for pupil in self.pupils:
+                opening = look[4] if pupil.centre[0] > 0 else look[5]
+                if opening:
+                    x[pupil.rows] += pupil.dilated(opening)
         for rows, centre in self.eyes:
             own = (0.0, 0.0) if look is None else look[0:2] if centre[0] > 0 else look[2:4]
             yaw, pitch = gaze[0] + own[0], gaze[1] + own[1]
@@ -362,6 +411,7 @@ def head_figure(head: Head, model) -> Figure:
         rest=x, colour=colour.astype(np.float32), parts=tuple(parts), sim_rest=np.asarray(sim_rest), anchor=head.landmarks,
         follow_rows=follow_rows, follow=follow, follow_gain=gain, jaw_rows=lower_rows[weight > 0], jaw_weight=weight[weight > 0],
         jaw_hinge=model.rig.jaw_hinge, jaw_axis=model.rig.jaw_axis, eyes=tuple(eyes), guards=tuple(guards), neck=np.array(HEAD_NECK),
+        pupils=tuple(_pupil(x, head, side) for side in ("left", "right")),
     )
 
 

@@ -25,7 +25,7 @@ from pydantic import Field, StrictInt, field_validator, model_validator
 from ..config import MIDLINE_FRACTION, SNAP_FRACTION
 from ..errors import InputError
 from ..physics.mesh import FaceMesh
-from ..physics.muscles import GAZE, JAW_CONTROLS, LINEAR, PUFF_PRESSURE, SPHINCTER, EyelidRig, JawRig, MuscleSet
+from ..physics.muscles import GAZE, JAW_CONTROLS, LINEAR, PUFF_PRESSURE, PUPIL, SPHINCTER, EyelidRig, JawRig, MuscleSet
 from ..schema import Strict, load_model
 
 #: A landmark: a vertex index (an integer: YAML's ``true`` is not vertex 1) or a 3D point.
@@ -308,7 +308,7 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         if any(g in controls for g in gaze):
             raise InputError(f"{where}: a second eyelid on the subject's {'left' if lid.name[-1] == 'l' else 'right'}")
         eyelids.append(EyelidRig(lid.name, upper, lower, lid.reach, lid.levator, float(np.radians(lid.levator_angle)), gaze))
-        controls += [lid.name] + ([lid.levator] if lid.levator else []) + list(gaze)
+        controls += [lid.name] + ([lid.levator] if lid.levator else []) + list(gaze) + [f"{PUPIL}_{lid.name[-1]}"]
     centre_start = np.cumsum([0] + [len(c) for c in centres]).astype(np.int64)
     return MuscleSet(
         names=tuple(m.name for m in spec.muscles) + tuple(controls),

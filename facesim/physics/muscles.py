@@ -82,6 +82,9 @@ GAZE = ("gaze_up", "gaze_down", "gaze_left", "gaze_right")
 #: eyeLook shapes at full weight; the eyes' range is larger (up 45-50, down 60, to
 #: either side 50 degrees), but gazes beyond 30 degrees come with the head.
 GAZE_ANGLE = (25.0, 30.0, 30.0, 30.0)
+#: An eye's pupil dilation control, 0-1, per eye with ``_l`` or ``_r`` (ICT's
+#: PupilDilate_L/_R; ARKit has none): drawn by the renderer (facesim.face.figure.Pupil).
+PUPIL = "pupil_dilate"
 
 
 @dataclass(frozen=True)

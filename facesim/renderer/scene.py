@@ -346,7 +346,7 @@ class FaceRenderer:
             uploads = [(self._face, np.hstack([positions, normals]).astype(np.float32))]
             angles = pose
         else:
-            scene = self._figure.positions(positions, jaw, tuple(pose[3:5]), pose[5:9] if len(pose) > 5 else None)
+            scene = self._figure.positions(positions, jaw, tuple(pose[3:5]), pose[5:] if len(pose) > 5 else None)
             uploads = self._figure_arrays(scene, slot)
             positions = scene[self._figure.anchor]
             if self._wire is not None:  # a hair in front of the skin, toward the camera
