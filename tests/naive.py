@@ -198,7 +198,8 @@ def rig_targets(model, activation):
     """Where the jaw and eyelids take each vertex (facesim.physics.rig): the lid closure c and the
     levator's raise a slide a vertex in cylindrical coordinates (x, φ, r) about its eye's
     horizontal axis by c Δ_close + a (1 - c) Δ_raise; then the jaw turns it by its weight w times θ = activation × max
-    angle about the hinge axis, turns the lips drawn to a side about the face's vertical
+    angle about the hinge axis (each lip rolled in about its own horizontal axis first),
+    turns the lips drawn to a side about the face's vertical
     axis, and carries it by w times its glide (the glide columns' activations times their
     glides). And the drive holding the lips and lid contours:
     drive × weight × min(1, 10 a) for the activation a of their control (the jaw's: its
@@ -217,6 +218,9 @@ def rig_targets(model, activation):
     slid = np.column_stack([p[:, 0] + delta[:, 0], rig.lid_centre[:, 1] + r * np.sin(phi), rig.lid_centre[:, 2] + r * np.cos(phi)])
     p = np.where(((c != 0) | (a != 0) | look.any(axis=1))[:, None], slid, p)
     if rig.jaw_column >= 0:
+        for k in range(2):  # each lip rolled in about the horizontal axis through its pivot, before the jaw turns
+            turn = activation[rig.lip_roll_column[k]] * rig.lip_roll[:, k] * rig.lip_roll_angle[k]
+            p = rig.lip_roll_pivot[k] + Rotation.from_rotvec(turn[:, None] * [1.0, 0.0, 0.0]).apply(p - rig.lip_roll_pivot[k])
         w = rig.jaw_weight + activation[rig.jaw_seal_column] * rig.jaw_seal  # the lips' seal changes the weight
         p = rig.jaw_hinge + Rotation.from_rotvec((w * rig.jaw_max * activation[rig.jaw_column])[:, None] * rig.jaw_axis
                                                  ).apply(p - rig.jaw_hinge)
@@ -227,7 +231,8 @@ def rig_targets(model, activation):
     driven = rig.drive_column >= 0
     a = np.maximum(activation[np.maximum(rig.drive_column, 0)], a)
     if rig.jaw_column >= 0:
-        jaw = max(activation[rig.jaw_glide_column].max(), activation[rig.lip_shift_column].max())
+        jaw = max(activation[rig.jaw_glide_column].max(), activation[rig.lip_shift_column].max(),
+                  activation[rig.lip_roll_column].max())
         a = np.where(rig.drive_column == rig.jaw_column, np.maximum(a, jaw), a)
     a = np.where((rig.drive_column >= 0) & (rig.drive_column == rig.lid_column), np.maximum(a, look.max(axis=1)), a)
     hold = np.where(driven, model.material.drive * rig.drive_weight * np.minimum(1.0, 10.0 * a), 0.0)
@@ -283,6 +288,7 @@ def contacts(model, x, v, activation, target):
     x, v = x.copy(), v.copy()
     rig = model.rig
     sealed = activation[rig.jaw_seal_column] if rig.jaw_seal_column >= 0 else 0.0
+    rolled = activation[rig.lip_roll_column].max() if rig.lip_roll_column[0] >= 0 else 0.0  # a rolled lip may pass 2 cm
     for u, l, n, gap, lips in zip(rig.contact_upper, rig.contact_lower, rig.contact_normal, rig.contact_gap,
                                   rig.contact_lips):
         e = (x[u] - x[l]) - (target[u] - target[l])
@@ -295,7 +301,7 @@ def contacts(model, x, v, activation, target):
             mean = (e @ v[u] + e @ v[l]) / 2  # held, they move together along e
             for k in (u, l):
                 v[k] += ((mean if not model.pinned[k] else 0.0) - e @ v[k]) * e
-        overlap = gap - n @ (x[u] - x[l])
+        overlap = gap - (2.0 * rolled if lips else 0.0) - n @ (x[u] - x[l])
         if overlap <= 0:
             continue
         moving = [k for k in (u, l) if not model.pinned[k]]

@@ -211,12 +211,15 @@ def test_looking_down_turns_that_eye_and_its_lids_follow():
     {"mouth_right": 1.0, "jaw": 1.0}, {"lip_seal": 1.0, "jaw": 1.0}, {"mouth_left": 1.0, "mouth_right": 1.0},
     {"mouth_left": 1.0, "jaw_sideways_l": 1.0}, {"mouth_left": 1.0, "jaw_sideways_r": 1.0},
     {"mouth_left": 1.0, "lip_seal": 1.0}, {"mouth_left": 1.0, "cheek_puff_l": 1.0, "cheek_puff_r": 1.0, "lip_seal": 1.0},
+    {"lip_roll_upper": 1.0}, {"lip_roll_lower": 1.0}, {"lip_roll_upper": 1.0, "jaw": 1.0},
+    {"lip_roll_lower": 1.0, "jaw": 1.0}, {"lip_roll_upper": 1.0, "lip_seal": 1.0, "jaw": 1.0},
+    {"lip_roll_lower": 1.0, "mouth_left": 1.0}, {"lip_roll_upper": 1.0, "mouth_right": 1.0},
 ], ids=lambda a: "+".join(a))
 def test_the_shapes_facs_has_no_unit_for_hold_200_frames_without_folding(activations):
-    """ARKit's mouthClose, mouthLeft and mouthRight drive controls, not action units, so
-    the fold sweep over the units (tests/test_folds.py) does not reach them: each alone,
-    with the jaw open, left with right, the lips to a side with the jaw to either side,
-    sealed, and puffed, held 200 frames, inverts no triangle and settles (kinetic energy
+    """ARKit's mouthClose, mouthLeft, mouthRight and mouthRoll drive controls, not action
+    units, so the fold sweep over the units (tests/test_folds.py; it has AU28, both lips
+    rolled) does not reach them alone: each alone, with the jaw open, left with right, the
+    lips to a side with the jaw to either side, sealed, puffed and rolled, held 200 frames, inverts no triangle and settles (kinetic energy
     at the end under 1e-6 of its peak)."""
     animation = facesim.simulate(Spec.model_validate(dict(name="held", frames=200, onset=10, activations=activations)))
     assert animation.inverted.max() == 0
@@ -233,6 +236,21 @@ def test_mouth_left_draws_the_lips_to_the_subjects_left():
     assert d[61, 0] > d[291, 0] > 0
     right = held(activations={"mouth_right": 1.0})
     assert right.positions[-1, 13, 0] - right.rest[13, 0] == pytest.approx(-d[13, 0], abs=0.02)
+
+
+def test_a_rolled_lip_tucks_in_behind_the_other():
+    """mouthRollUpper: the upper lip's edge (MediaPipe 13) goes at least 7 mm back and its
+    vermilion's top (0) down, the lower lip stays within 2 mm; mouthRollLower: the lower
+    lip's edge (14) goes 7 mm back and its vermilion's bottom (17) up, past where the
+    upper lip's edge stays (the lips' contact lets a rolled lip pass)."""
+    upper = held(activations={"lip_roll_upper": 1.0})
+    d = upper.positions[-1] - upper.rest
+    assert d[13, 2] < -0.7 and d[0, 1] < -0.2 and np.linalg.norm(d[[14, 17]], axis=1).max() < 0.2
+    lower = held(activations={"lip_roll_lower": 1.0})
+    x, x0 = lower.positions[-1], lower.rest
+    assert x[14, 2] - x0[14, 2] < -0.7 and x[17, 1] - x0[17, 1] > 0.3
+    assert x[14, 2] < x[13, 2] - 0.5  # tucked behind the upper lip's edge
+    assert np.linalg.norm(x[[0, 13]] - x0[[0, 13]], axis=1).max() < 0.2
 
 
 def test_lips_part_with_the_jaw_still():

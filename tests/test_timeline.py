@@ -152,7 +152,9 @@ def test_bad_timelines_are_one_line_errors(tmp_path, muscles, track, message):
 
 def test_happy_surprise_as_a_blend_of_happy_and_surprise():
     """Blending happy and surprise (expressions/blends/) gives the thesis's composite's
-    brows, within a millimetre (the frontalis come from surprise unchanged), with happy's
+    brows, within 1.2 mm (the frontalis come from surprise unchanged; the zygomaticus major,
+    arising from the cheekbone under the eye since its recalibration, reaches the outer
+    brows 1.16 mm, where it reached under 1), with happy's
     lip corners drawn up and out over surprise's own, and surprise's open jaw, which the
     thesis's composite (a jawless face) leaves out. Up and out, as ICT's smile (AU12)
     moves them: with the jaw dropped, the calibrated zygomaticus major draws them 1.5 mm
@@ -162,7 +164,7 @@ def test_happy_surprise_as_a_blend_of_happy_and_surprise():
     surprise = facesim.simulate(load_spec(EXPRESSIONS / "surprise.yaml"))
     assert blend.inverted.max() == 0
     shape_gap = np.linalg.norm(composite.positions[-1] - blend.positions[-1], axis=1)
-    assert shape_gap[[105, 334, 70, 300]].max() < 0.1
+    assert shape_gap[[105, 334, 70, 300]].max() < 0.12
     for corner, outward in ((61, -1.0), (291, 1.0)):
         drawn = blend.positions[-1, corner] - surprise.positions[-1, corner]
         assert drawn[1] > 0.05 and outward * drawn[0] > 0.05 and np.hypot(drawn[0], drawn[1]) > 0.15

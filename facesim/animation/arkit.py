@@ -50,6 +50,8 @@ _WHOLE = {
     # no FACS unit: the lips sealed over the open jaw, a control of the jaw's rig (facesim.physics.rig)
     "mouthClose": "lip_seal",
     "mouthLeft": "mouth_left", "mouthRight": "mouth_right",
+    # FACS's AU28 (lip suck) rolls both; ARKit and ICT roll each lip alone
+    "mouthRollUpper": "lip_roll_upper", "mouthRollLower": "lip_roll_lower",
     # the eyes: up and down are FACS's AU63/AU64 per eye; out is toward the eye's own side
     "eyeLookUpLeft": "AU63_L", "eyeLookDownLeft": "AU64_L", "eyeLookOutLeft": "AU61_L", "eyeLookInLeft": "AU62_L",
     "eyeLookUpRight": "AU63_R", "eyeLookDownRight": "AU64_R", "eyeLookOutRight": "AU62_R", "eyeLookInRight": "AU61_R",
@@ -58,7 +60,6 @@ _WHOLE = {
 
 #: Shapes facesim has no anatomy for yet, and what each needs.
 NOT_SIMULATED = {
-    "mouthRollLower": "the lower lip rolled in (AU28)", "mouthRollUpper": "the upper lip rolled in (AU28)",
     "tongueOut": "the tongue as a rigged part (AU19)",
 }
 

@@ -118,6 +118,10 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     # the condyles glide along the articular eminence (facesim.physics.rig): forward, and
     # to one side (FACS scores AU30 with L or R: the side the jaw moves to)
     "AU29": ("jaw thrust", {"jaw_thrust": 1.0}),
+    # the orbicularis oris's marginal part rolls both lips in over the teeth (the jaw's
+    # rig); each at 0.7: both at 1, the rolled lips meet behind the teeth's line and fold
+    # 2 triangles where they do (ARKit's mouthRollUpper and mouthRollLower are each alone)
+    "AU28": ("lip suck", {"lip_roll_upper": 0.7, "lip_roll_lower": 0.7}),
     # air held in the closed mouth pushes the cheeks out (facesim.physics.pressure); the
     # lips are held shut against it (the jaw rig's seal: facesim.physics.contacts)
     "AU34": ("cheek puff", {"cheek_puff": 1.0, "lip_seal": 1.0}),

@@ -14,6 +14,9 @@ from ..config import NUMBA_OPTIONS
 #: How far apart (cm) lips sealed with s < 1 may part beyond where the rig puts them:
 #: (1 - s) of this. Sealed fully, not at all.
 SEAL_SLACK = 1.0
+#: How far (cm) a lip rolled in fully (AU28) may pass the other along their contact
+#: normal: ICT's mouthRollLower takes the lower lip's edge 1.2 cm back behind the upper's.
+ROLL_PASS = 2.0
 
 
 @njit(**NUMBA_OPTIONS)
@@ -25,9 +28,13 @@ def _contacts(model, state, control):
     collisions). Across n they slide freely. A lip pair sealed with s > 0 is also kept
     within its gap plus (1 - s) ``SEAL_SLACK`` of where the rig's targets put it relative
     to each other: e = (X_u - X_l) - (T_u - T_l), |e| at most that, both moved half the
-    excess toward each other along e (``_held_together``)."""
+    excess toward each other along e (``_held_together``). A lip rolled in (either roll's
+    activation r) lets the lips' pairs pass ``ROLL_PASS`` r along n."""
     x, v, pinned = state.x, state.v, model.pinned
     sealed = control.activation[model.jaw_seal_column] if model.jaw_seal_column >= 0 else 0.0
+    rolled = 0.0  # a lip rolled in tucks behind the other: the lips' contact lets it pass
+    if model.lip_roll_column[0] >= 0:
+        rolled = max(control.activation[model.lip_roll_column[0]], control.activation[model.lip_roll_column[1]])
     for k in range(model.contact_upper.shape[0]):
         u = model.contact_upper[k]
         l = model.contact_lower[k]
@@ -36,7 +43,7 @@ def _contacts(model, state, control):
             # within the gap (none where a pair starts within it: the lips' middle crosses the
             # tilted plane at rest) and the seal's slack
             _held_together(x, v, pinned, control.target, u, l, max(model.contact_gap[k], 0.0) + (1.0 - sealed) * SEAL_SLACK)
-        overlap = model.contact_gap[k]
+        overlap = model.contact_gap[k] - (ROLL_PASS * rolled if model.contact_lips[k] else 0.0)
         for d in range(3):
             overlap -= n[d] * (x[u, d] - x[l, d])
         if overlap <= 0.0:

@@ -29,7 +29,7 @@ ModelArrays = namedtuple("ModelArrays", [
     "hinge", "hinge_weight",
     "muscle_kind", "muscle_axes", "muscle_insertion", "muscle_centre_start", "muscle_centre_index",
     "muscle_cos_zone", "muscle_r", "muscle_r_max", "muscle_force", "muscle_protrusion", "rest_vertex_normal", "axis_x", "axis_z", "radius",
-    "jaw_column", "jaw_weight", "jaw_hinge", "jaw_axis", "jaw_max", "lip_shift_column", "lip_shift", "pressure_column", "pressure_weight", "pressure", "jaw_seal_column", "jaw_seal", "jaw_glide_column", "jaw_glide", "lid_column", "lid_centre", "lid_delta",
+    "jaw_column", "jaw_weight", "jaw_hinge", "jaw_axis", "jaw_max", "lip_shift_column", "lip_shift", "lip_roll_column", "lip_roll", "lip_roll_pivot", "lip_roll_angle", "pressure_column", "pressure_weight", "pressure", "jaw_seal_column", "jaw_seal", "jaw_glide_column", "jaw_glide", "lid_column", "lid_centre", "lid_delta",
     "lid_raise_column", "lid_raise_delta", "lid_look_column", "lid_look_delta", "gaze_column", "drive_column", "drive_weight", "contact_upper", "contact_lower", "contact_lips", "contact_normal", "contact_gap",
     "mass", "damping", "stiffness", "nonlinearity", "repulsion_nonlinearity", "length_unit", "tissue", "drive",
     "bending", "edge_repulsion", "uv_projection", "attached_regions", "implicit", "iterations", "tolerance",

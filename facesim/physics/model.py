@@ -326,7 +326,7 @@ REORDER_FROM = 4000
 #: new vertex order: rows per vertex, vertex numbers as values, rows per spring, per
 #: triangle or per hinge, compressed rows per vertex, or unchanged (per muscle, scalars).
 #: Every field is named once (tests/test_model.py), so a new one cannot be forgotten.
-PER_VERTEX = ("rest_position", "pinned", "tie", "rest_vertex_normal", "jaw_weight", "jaw_seal", "lip_shift",
+PER_VERTEX = ("rest_position", "pinned", "tie", "rest_vertex_normal", "jaw_weight", "jaw_seal", "lip_shift", "lip_roll",
               "pressure_weight", "lid_column", "lid_centre",
               "lid_delta", "lid_raise_column", "lid_raise_delta", "lid_look_column", "lid_look_delta", "drive_column",
               "drive_weight")
@@ -338,7 +338,7 @@ PER_HINGE = ("hinge", "hinge_weight")
 PER_VERTEX_ROWS = ("neighbour_start", "neighbour_index", "ring_start", "ring_a", "ring_b")
 UNCHANGED = ("muscle_kind", "muscle_axes", "muscle_centre_start", "muscle_cos_zone", "muscle_r", "muscle_r_max",
              "muscle_force", "muscle_protrusion", "axis_x", "axis_z", "radius", "jaw_column", "jaw_hinge", "jaw_axis",
-             "jaw_max", "lip_shift_column", "gaze_column", "contact_lips", "pressure_column", "pressure", "jaw_seal_column", "jaw_glide_column", "jaw_glide", "contact_normal", "contact_gap", "mass", "damping", "stiffness",
+             "jaw_max", "lip_shift_column", "lip_roll_column", "lip_roll_pivot", "lip_roll_angle", "gaze_column", "contact_lips", "pressure_column", "pressure", "jaw_seal_column", "jaw_glide_column", "jaw_glide", "contact_normal", "contact_gap", "mass", "damping", "stiffness",
              "nonlinearity", "repulsion_nonlinearity", "length_unit", "tissue", "drive", "bending", "edge_repulsion",
              "uv_projection", "attached_regions", "implicit", "iterations", "tolerance")
 

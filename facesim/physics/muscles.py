@@ -53,10 +53,11 @@ PUFF_PRESSURE = 1600.0
 #: (AU30 left and right: one column each, as activations are 0-1), the lips sealed
 #: over it as it opens (ARKit's mouthClose: facesim.physics.rig), and the air pressure
 #: in the mouth it closes, on each cheek (AU34, cheek puff: facesim.physics.pressure),
-#: and the lips drawn as a whole to the subject's left or right (ARKit's mouthLeft and
-#: mouthRight, which FACS has no unit for: facesim.physics.rig).
+#: the lips drawn as a whole to the subject's left or right (ARKit's mouthLeft and
+#: mouthRight, which FACS has no unit for: facesim.physics.rig), and each lip rolled in
+#: over the teeth (AU28, lip suck; ARKit's mouthRollUpper and mouthRollLower).
 JAW_CONTROLS = ("jaw", "jaw_thrust", "jaw_sideways_l", "jaw_sideways_r", "lip_seal", "cheek_puff_l", "cheek_puff_r",
-                "mouth_left", "mouth_right")
+                "mouth_left", "mouth_right", "lip_roll_upper", "lip_roll_lower")
 
 
 @dataclass(frozen=True)

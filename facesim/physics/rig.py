@@ -85,6 +85,31 @@ CAVITY_CORE = 0.5
 LIP_SHIFT = 2.0
 LIP_SHIFT_REACH = 3.0
 LIP_LEADING = 0.45
+#: The lips rolled in over the teeth (``lip_roll_upper``/``lip_roll_lower``: FACS AU28,
+#: lip suck; ARKit's mouthRollUpper and mouthRollLower): the orbicularis oris's marginal
+#: part turns each lip about a horizontal axis through a pivot inside it, the upper lip's
+#: edge back and its vermilion down, the lower's back and up. A rigid turn fits ICT's
+#: shapes at the lips' middle (within 0.6 mm for the upper, 2.5 mm for the lower) by 45
+#: and -45.5 degrees about pivots LIP_ROLL_PIVOT (up, forward) mouth half-widths from the
+#: mouth opening's centre; the upper lip turns 57 (the skin holds it back: at 45 it
+#: reached 0.66 of ICT's amplitude). Against ICT's on the default head: upper cosine
+#: 0.82, amplitude 0.78; lower 0.83, 0.96.
+LIP_ROLL_ANGLE = (57.0, -45.5)
+LIP_ROLL_PIVOT = ((0.51, -0.01), (-0.78, -0.27))
+#: How much of each lip (upper, lower) turns: all of it within LIP_ROLL_BAND mouth
+#: half-widths of its edge and nearer it than the other lip's, easing to the corners,
+#: which turn LIP_ROLL_CORNER of the middle (ICT's: 0.45 for the upper lip, 0.1 for the
+#: lower; the upper's at 0.45 folded 2 triangles there), harmonic out to nothing at the
+#: other lip and LIP_ROLL_REACH half-widths from the mouth's centre (a band of 0.25 and
+#: reach of 1.6, as first tried: cosine 0.77 and 0.63).
+LIP_ROLL_BAND = (0.4, 0.4)
+LIP_ROLL_CORNER = (0.35, 0.1)
+LIP_ROLL_REACH = (1.2, 1.2)
+#: Each roll (upper, lower) holds the other lip still at its edge and, out to this many
+#: mouth half-widths from the middle, over its band: the lower roll holds the whole
+#: upper lip (not holding it, the upper lip turned too and folded); the upper roll lets
+#: the lower lip follow a little (held, its cosine fell to 0.77).
+LIP_ROLL_APART = (0.0, 1.0)
 #: The lips part as a wedge over this fraction of the mouth's width from each corner.
 JAW_WEDGE = 0.3
 #: The mouth corners follow the jaw by this much of the lower lip's travel (a little less
@@ -141,6 +166,9 @@ class Rig:
     jaw_max : θ at activation 1 (radians); lip_shift_column : (2,) activation columns of
     the lips drawn to the subject's left and right (-1 without a jaw); lip_shift :
     (n, 2) how far (cm, along the face) each vertex slides with them at 1, to either side;
+    lip_roll_column : (2,) activation columns of the upper and the lower lip rolled in (-1
+    without a jaw); lip_roll : (n, 2) each vertex's share of either roll; lip_roll_pivot :
+    (2, 3) a point on each roll's axis (+x); lip_roll_angle : (2,) each roll at 1 (radians);
     pressure_column : (2,) activation columns of
     the pressure in the mouth on the subject's left and right cheek (-1 without a jaw);
     pressure_weight : (n, 2) each vertex's share of the cavity's wall on either side;
@@ -172,6 +200,10 @@ class Rig:
     jaw_max: float
     lip_shift_column: np.ndarray
     lip_shift: np.ndarray
+    lip_roll_column: np.ndarray
+    lip_roll: np.ndarray
+    lip_roll_pivot: np.ndarray
+    lip_roll_angle: np.ndarray
     pressure_column: np.ndarray
     pressure_weight: np.ndarray
     pressure: float
@@ -282,6 +314,43 @@ def _lips_around(mesh: FaceMesh, jaw, corners: np.ndarray) -> np.ndarray:
         values = np.concatenate([share, np.zeros(len(still))])
         out[:, k] = np.clip(harmonic(mesh, np.concatenate([lips, still]), values[:, None])[:, 0], 0.0, 1.0)
     return out
+
+
+def _lips_rolled(mesh: FaceMesh, jaw, corners: np.ndarray, jaw_weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 2) each vertex's share of the upper and the lower lip's roll (LIP_ROLL_ANGLE)
+    and (2, 3) the two pivots: module docstring and LIP_ROLL_BAND. Which lip a vertex is
+    on is the jaw's weight's (under a half: the upper), not its nearer edge: closed, the
+    lips' skin lies a millimetre apart, and by distance the upper lip's middle fell to
+    the lower, and folded when it rolled."""
+    n = mesh.vertex_count
+    loop = _opening(mesh, jaw.lower)
+    if loop is None:
+        return np.zeros((n, 2)), np.zeros((2, 3))
+    x = mesh.vertices
+    centre, half = x[loop].mean(axis=0), np.ptp(x[loop, 0]) / 2
+    ends = sorted([int(np.argmin(x[loop, 0])), int(np.argmax(x[loop, 0]))])
+    arcs = loop[ends[0] + 1:ends[1]], np.concatenate([loop[ends[1] + 1:], loop[:ends[0]]])
+    lower_first = np.isin(jaw.lower, arcs[0]).sum() >= np.isin(jaw.lower, arcs[1]).sum()
+    edges = (np.union1d(jaw.upper, arcs[1 if lower_first else 0]), np.union1d(jaw.lower, arcs[0 if lower_first else 1]))
+    rim = mesh.boundary_loops[0] if mesh.boundary_loops else np.zeros(0, dtype=np.int64)
+    out = np.zeros((n, 2))
+    distance = [np.linalg.norm(x[:, None, :2] - x[None, edge, :2], axis=2).min(axis=1) for edge in edges]
+    bands = []
+    for k, edge in enumerate(edges):  # each lip: within the band of its edge, and nearer it than the other lip's
+        near = (distance[k] < LIP_ROLL_BAND[k] * half) & ((jaw_weight < 0.5) if k == 0 else (jaw_weight >= 0.5))
+        bands.append(np.union1d(np.setdiff1d(np.flatnonzero(near), np.concatenate([edges[1 - k], corners])), edge))
+    for k, band in enumerate(bands):
+        far = np.flatnonzero(np.linalg.norm((x - centre)[:, :2], axis=1) > LIP_ROLL_REACH[k] * half)
+        across = np.abs(x[band, 0] - centre[0]) / half
+        share = 1.0 - (1.0 - LIP_ROLL_CORNER[k]) * _smoothstep(across)
+        # the other lip does not turn, but toward the corners, where the lips share their skin
+        other = np.union1d(edges[1 - k], bands[1 - k][np.abs(x[bands[1 - k], 0] - centre[0]) < LIP_ROLL_APART[k] * half])
+        still = np.setdiff1d(np.union1d(np.union1d(far, rim), other), band)
+        fixed = np.concatenate([band, corners, still])
+        values = np.concatenate([share, np.full(len(corners), LIP_ROLL_CORNER[k]), np.zeros(len(still))])
+        out[:, k] = np.clip(harmonic(mesh, fixed, values[:, None])[:, 0], 0.0, 1.0)
+    pivots = np.array([[0.0, centre[1] + up * half, centre[2] + forward * half] for up, forward in LIP_ROLL_PIVOT])
+    return out, pivots
 
 
 def _cavity_wall(mesh: FaceMesh, jaw) -> tuple[np.ndarray, float]:
@@ -422,6 +491,8 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
         pressure = winding * muscles.jaw.puff_pressure
         lip_shift_column = np.array([muscles.index("mouth_left"), muscles.index("mouth_right")], dtype=np.int64)
         lip_shift = LIP_SHIFT * _lips_around(mesh, muscles.jaw, corners)
+        lip_roll_column = np.array([muscles.index("lip_roll_upper"), muscles.index("lip_roll_lower")], dtype=np.int64)
+        lip_roll, lip_roll_pivot = _lips_rolled(mesh, muscles.jaw, corners, jaw_weight)
         drive_column[jaw_weight > 0] = jaw_column
         drive_weight[:] = JAW_DRIVE * jaw_weight
         drive_weight[corners] = 1.0
@@ -436,6 +507,7 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
         seal_column, seal = -1, np.zeros(n)
         pressure_column, pressure_weight, pressure = np.full(2, -1, dtype=np.int64), np.zeros((n, 2)), 0.0
         lip_shift_column, lip_shift = np.full(2, -1, dtype=np.int64), np.zeros((n, 2))
+        lip_roll_column, lip_roll, lip_roll_pivot = np.full(2, -1, dtype=np.int64), np.zeros((n, 2)), np.zeros((2, 3))
     lid_column = np.full(n, -1, dtype=np.int64)
     lid_centre = np.zeros((n, 3))
     lid_delta = np.zeros((n, 3))
@@ -473,6 +545,7 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
                                                  for up, _, tilt in parts])
     gap = np.minimum(CONTACT_GAP, np.einsum("kd,kd->k", mesh.vertices[upper] - mesh.vertices[lower], normal))
     lips = np.arange(len(upper)) < (len(muscles.jaw.upper) if muscles.jaw is not None else 0)  # the jaw's pairs first
-    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, lip_shift_column, lip_shift, pressure_column, pressure_weight, pressure, seal_column, seal,
+    return Rig(jaw_column, jaw_weight, hinge, axis, jaw_max, lip_shift_column, lip_shift, lip_roll_column, lip_roll,
+               lip_roll_pivot, np.radians(LIP_ROLL_ANGLE), pressure_column, pressure_weight, pressure, seal_column, seal,
                glide_column, glide, lid_column, lid_centre, lid_delta, lid_raise_column, lid_raise_delta, lid_look_column,
                lid_look_delta, gaze_column, drive_column, drive_weight, upper, lower, lips, normal, gap)

@@ -47,7 +47,10 @@ def _rig_control(model, control):
     glide's its weight alone (sealed lips glide with the jaw). The lips drawn to a side
     (``lip_shift_column``: a_left, a_right) turn about the vertical axis of the face's
     cylinder (``axis_x``, ``axis_z``, ``radius``) by (a_left ``lip_shift``[0] - a_right
-    ``lip_shift``[1]) / R, after the jaw's turn.
+    ``lip_shift``[1]) / R, after the jaw's turn. Each lip rolled in (``lip_roll_column``:
+    the upper, the lower) turns about the horizontal axis through its pivot by its
+    activation times the vertex's share times its angle (``lip_roll``,
+    ``lip_roll_pivot``, ``lip_roll_angle``), before the jaw's turn.
     ``control.hold`` is the extra stiffness driving the lips and lid contours,
     drive * min(1, 10 a) for the activation a of their control (a lid's: the largest of its
     closure, its raise and its eye's gaze controls; the jaw's: the largest of its opening
@@ -62,6 +65,10 @@ def _rig_control(model, control):
     if model.lip_shift_column[0] >= 0:
         to_left, to_right = activation[model.lip_shift_column[0]], activation[model.lip_shift_column[1]]
     shifting = max(to_left, to_right)
+    roll_upper = roll_lower = 0.0  # each lip rolled in about its own horizontal axis
+    if model.lip_roll_column[0] >= 0:
+        roll_upper, roll_lower = activation[model.lip_roll_column[0]], activation[model.lip_roll_column[1]]
+    rolling = max(roll_upper, roll_lower)
     sealed = activation[model.jaw_seal_column] if model.jaw_seal_column >= 0 else 0.0
     gliding = 0.0
     for k in range(model.jaw_glide_column.shape[0]):
@@ -85,7 +92,7 @@ def _rig_control(model, control):
                 lr += look * model.lid_look_delta[i, g, 2]
         driving = max(activation[column], a) if column >= 0 else 0.0
         if column >= 0 and column == model.jaw_column:
-            driving = max(driving, gliding, shifting)
+            driving = max(driving, gliding, shifting, rolling)
         elif column >= 0 and column == model.lid_column[i]:
             driving = max(driving, looking)
         control.hold[i] = model.drive * model.drive_weight[i] * min(1.0, 10.0 * driving)
@@ -101,6 +108,11 @@ def _rig_control(model, control):
                 px += c * model.lid_delta[i, 0] + a * model.lid_raise_delta[i, 0] + lx
                 py = model.lid_centre[i, 1] + r * math.sin(phi)
                 pz = model.lid_centre[i, 2] + r * math.cos(phi)
+        for k in range(2):
+            turn = (roll_upper if k == 0 else roll_lower) * model.lip_roll[i, k] * model.lip_roll_angle[k]
+            if turn != 0.0:
+                o = model.lip_roll_pivot[k]
+                px, py, pz = _rotate(px, py, pz, o[0], o[1], o[2], 1.0, 0.0, 0.0, turn)
         w = model.jaw_weight[i] + sealed * model.jaw_seal[i]
         if theta != 0.0 and w > 0.0:
             h, a = model.jaw_hinge, model.jaw_axis
