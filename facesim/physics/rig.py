@@ -246,6 +246,33 @@ def _opening(mesh: FaceMesh, vertices: np.ndarray) -> np.ndarray | None:
     return next((loop for loop in mesh.boundary_loops[1:] if np.isin(vertices, loop).any()), None)
 
 
+def _rim(mesh: FaceMesh) -> np.ndarray:
+    """The mesh's outer boundary loop (held still by every rig field), if it has one."""
+    return mesh.boundary_loops[0] if mesh.boundary_loops else np.zeros(0, dtype=np.int64)
+
+
+def _arcs(loop: np.ndarray, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """The two arcs of a closed ``loop`` between its positions ``a`` and ``b`` (neither
+    included), each running from ``a`` to ``b``: one way round, and the other."""
+    one = np.roll(loop, -a)[1:(b - a) % len(loop)]
+    other = np.roll(loop, -b)[1:(a - b) % len(loop)][::-1]
+    return one, other
+
+
+def _lip_edges(mesh: FaceMesh, jaw, loop: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The upper and the lower lip's edge and the two mouth corners on the mouth opening's
+    ``loop``: its two arcs between the corners (its leftmost and rightmost vertices) are
+    the lower lip, which holds the listed lower points, and the upper lip; a finer mesh
+    has more vertices on them than the muscle file lists."""
+    x = mesh.vertices
+    ends = sorted([int(np.argmin(x[loop, 0])), int(np.argmax(x[loop, 0]))])
+    arcs = _arcs(loop, *ends)
+    lower_first = np.isin(jaw.lower, arcs[0]).sum() >= np.isin(jaw.lower, arcs[1]).sum()
+    upper = np.union1d(jaw.upper, arcs[1 if lower_first else 0])
+    lower = np.union1d(jaw.lower, arcs[0 if lower_first else 1])
+    return upper, lower, loop[ends]
+
+
 def _jaw(mesh: FaceMesh, muscles: MuscleSet):
     """The jaw's column, per-vertex weight, hinge point and axis, angle at activation 1,
     the mouth-corner vertices (driven firmly), and the weight's change when the lips are
@@ -256,19 +283,11 @@ def _jaw(mesh: FaceMesh, muscles: MuscleSet):
     axis = hinge[1] - hinge[0]
     axis = axis / np.linalg.norm(axis) * np.sign(axis[0] or 1.0)
     below = x[:, 1] < hinge[:, 1].mean()
-    rim = mesh.boundary_loops[0] if mesh.boundary_loops else np.zeros(0, dtype=np.int64)
-    # The mouth opening's two arcs between its corners (its leftmost and rightmost
-    # vertices) are the lower lip, which holds the listed lower points, and the upper lip;
-    # a finer mesh has more vertices on them than the muscle file lists.
+    rim = _rim(mesh)
     lower, upper, corners = jaw.lower, jaw.upper, np.zeros(0, dtype=np.int64)
     loop = _opening(mesh, jaw.lower)
     if loop is not None:
-        ends = sorted([int(np.argmin(x[loop, 0])), int(np.argmax(x[loop, 0]))])
-        arcs = loop[ends[0] + 1:ends[1]], np.concatenate([loop[ends[1] + 1:], loop[:ends[0]]])
-        lower_first = np.isin(jaw.lower, arcs[0]).sum() >= np.isin(jaw.lower, arcs[1]).sum()
-        lower = np.union1d(jaw.lower, arcs[0 if lower_first else 1])
-        upper = np.union1d(jaw.upper, arcs[1 if lower_first else 0])
-        corners = loop[ends]
+        upper, lower, corners = _lip_edges(mesh, jaw, loop)
     # The lips part as a wedge: toward each corner (with any vertex all but touching it)
     # their weights meet half way, or the tissue at the corner folds over.
     lips = np.concatenate([lower, upper])
@@ -305,7 +324,7 @@ def _lips_around(mesh: FaceMesh, jaw, corners: np.ndarray) -> np.ndarray:
     lips = np.unique(np.concatenate([loop, corners, jaw.upper, jaw.lower]))
     centre, half = x[loop].mean(axis=0), np.ptp(x[loop, 0]) / 2
     far = np.flatnonzero(np.linalg.norm((x - centre)[:, :2], axis=1) > LIP_SHIFT_REACH * half)
-    rim = mesh.boundary_loops[0] if mesh.boundary_loops else np.zeros(0, dtype=np.int64)
+    rim = _rim(mesh)
     still = np.setdiff1d(np.union1d(far, rim), lips)
     out = np.zeros((mesh.vertex_count, 2))
     for k, toward in enumerate((1.0, -1.0)):  # to the left (+x), to the right
@@ -328,11 +347,8 @@ def _lips_rolled(mesh: FaceMesh, jaw, corners: np.ndarray, jaw_weight: np.ndarra
         return np.zeros((n, 2)), np.zeros((2, 3))
     x = mesh.vertices
     centre, half = x[loop].mean(axis=0), np.ptp(x[loop, 0]) / 2
-    ends = sorted([int(np.argmin(x[loop, 0])), int(np.argmax(x[loop, 0]))])
-    arcs = loop[ends[0] + 1:ends[1]], np.concatenate([loop[ends[1] + 1:], loop[:ends[0]]])
-    lower_first = np.isin(jaw.lower, arcs[0]).sum() >= np.isin(jaw.lower, arcs[1]).sum()
-    edges = (np.union1d(jaw.upper, arcs[1 if lower_first else 0]), np.union1d(jaw.lower, arcs[0 if lower_first else 1]))
-    rim = mesh.boundary_loops[0] if mesh.boundary_loops else np.zeros(0, dtype=np.int64)
+    edges = _lip_edges(mesh, jaw, loop)[:2]
+    rim = _rim(mesh)
     out = np.zeros((n, 2))
     distance = [np.linalg.norm(x[:, None, :2] - x[None, edge, :2], axis=2).min(axis=1) for edge in edges]
     bands = []
@@ -411,12 +427,10 @@ def _lid_arcs(mesh: FaceMesh, opening: np.ndarray | None, lid) -> tuple[np.ndarr
     first = int(np.flatnonzero(opening == lid.upper[0])[0])
     # the corner nearer the lid's first point along the loop is the outer one
     at.sort(key=lambda c: min((c - first) % len(opening), (first - c) % len(opening)))
-    arcs = []
-    for points in (lid.upper, lid.lower):
-        one = np.roll(opening, -at[0])[1:(at[1] - at[0]) % len(opening)]  # one way round, corner to corner
-        other = np.roll(opening, -at[1])[1:(at[0] - at[1]) % len(opening)][::-1]  # the other way
-        arcs.append(one if np.isin(points, one).sum() > np.isin(points, other).sum() else other)
-    return arcs[0], arcs[1], opening[at]
+    one, other = _arcs(opening, *at)
+    upper, lower = (one if np.isin(points, one).sum() > np.isin(points, other).sum() else other
+                    for points in (lid.upper, lid.lower))
+    return upper, lower, opening[at]
 
 
 def _along(n: int) -> np.ndarray:
