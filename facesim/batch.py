@@ -66,7 +66,8 @@ def render_one(spec_path: Path, output: Path, settings: RenderSettings, backend:
 def run_batch(specs: list[Path], outdir: Path, suffix: str, settings: RenderSettings, backend: str, jobs: int,
               force: bool, mesh: Path | None = None, muscles: Path | None = None, identity: int | None = None,
               face: Path | None = None, on_done=None,
-              executor: str = "local", scheduler: str | None = None) -> list[BatchResult]:
+              executor: str = "local", scheduler: str | None = None,
+              scheduler_timeout: float | None = None) -> list[BatchResult]:
     outputs = [outdir / (s.stem + suffix) for s in specs]
     if len(set(outputs)) != len(outputs):
         raise InputError("two specs share a file name; their outputs would collide in " + str(outdir))
@@ -81,7 +82,7 @@ def run_batch(specs: list[Path], outdir: Path, suffix: str, settings: RenderSett
     if executor == "dask":
         from .dataset import dask_client, run_on_dask
 
-        run_on_dask(dask_client(scheduler, jobs), render_one, list(zip(*args)), done)
+        run_on_dask(dask_client(scheduler, jobs, scheduler_timeout), render_one, list(zip(*args)), done)
     elif jobs <= 1:
         for a in args:
             done(render_one(*a))

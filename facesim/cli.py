@@ -15,6 +15,7 @@ from typing import Optional
 import numpy as np
 import typer
 
+from .dataset import SCHEDULER_TIMEOUT
 from .errors import FacesimError, InputError
 from .files import Terminated, check_destination, handling_termination, terminating_signal
 from .workers import capped_jobs
@@ -90,6 +91,8 @@ MUSCLES = typer.Option(None, "--muscles", help="muscle file to use instead of th
 IDENTITY = typer.Option(None, "--identity", help="the head's identity instead of the spec's: a seed for the "
                         "weights of ICT's 100 identity modes (standard normal)")
 FACE = typer.Option(None, "--face", help="a face directory (facesim face from-photo): your head, its muscles and texture")
+SCHEDULER = typer.Option(None, "--scheduler", help="tcp://HOST:PORT of a Dask scheduler")
+SCHEDULER_TIMEOUT_OPTION = typer.Option(SCHEDULER_TIMEOUT, "--scheduler-timeout", help="seconds to wait for --scheduler to answer")
 LOOK = typer.Option("auto", "--look", help="photo (a face directory's baked photo, unlit), clay (facesim's materials, "
                     "lit), or auto: photo for a head with a face directory")
 
@@ -208,7 +211,8 @@ def batch(
     face: Optional[Path] = FACE,
     look: str = LOOK,
     executor: str = typer.Option("local", "--executor", help="local (processes) or dask"),
-    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="tcp://HOST:PORT of a Dask scheduler"),
+    scheduler: Optional[str] = SCHEDULER,
+    scheduler_timeout: float = SCHEDULER_TIMEOUT_OPTION,
 ):
     """Render many specs in parallel; a failing spec does not stop the others."""
     from rich.console import Console
@@ -235,7 +239,8 @@ def batch(
         raise InputError(f"{outdir}: is not a directory")
     with progress_bar(len(specs), "batch") as advance:
         results = run_batch(specs, outdir, suffix, settings, backend, jobs, force, mesh, muscles, identity_seed(identity), face,
-                            on_done=(lambda _: advance()) if advance else None, executor=executor, scheduler=scheduler)
+                            on_done=(lambda _: advance()) if advance else None, executor=executor, scheduler=scheduler,
+                            scheduler_timeout=scheduler_timeout)
     table = Table(title=f"facesim batch: {len(specs)} specs")
     for column in ("spec", "muscles", "frames", "simulation (ms)", "render (s)", "fps", "output"):
         table.add_column(column, justify="left" if column in ("spec", "output") else "right")
@@ -477,7 +482,8 @@ def dataset(
     n: int = typer.Option(..., "--n", help="number of samples"),
     seed: int = typer.Option(0, "--seed", help="the same seed gives the same dataset on any executor"),
     executor: str = typer.Option("local", "--executor", help="local (processes) or dask"),
-    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="tcp://HOST:PORT of a Dask scheduler"),
+    scheduler: Optional[str] = SCHEDULER,
+    scheduler_timeout: float = SCHEDULER_TIMEOUT_OPTION,
     jobs: int = typer.Option(2, "--jobs", help="worker processes (local, or the Dask LocalCluster)"),
     size: str = typer.Option("256x256", "--size", help="image size WxH"),
     jitter: bool = typer.Option(False, "--jitter", help="vary the camera and the lights per sample"),
@@ -499,7 +505,8 @@ def dataset(
         face = load_face_directory(face).path
     settings = DatasetSettings(seed, width, height, jitter, backend, clip, None if face is None else str(face), look)
     with progress_bar(max(n, 0), "dataset") as advance:
-        manifest = build_dataset(output, n, settings, executor, jobs, scheduler, advance, warn=notice)
+        manifest = build_dataset(output, n, settings, executor, jobs, scheduler, advance, warn=notice,
+                                 scheduler_timeout=scheduler_timeout)
     typer.echo(f"wrote {manifest} ({n} samples)", err=True)
     if sheet_png:
         dataset_sheet(output, sheet_png)

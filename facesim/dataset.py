@@ -51,7 +51,7 @@ from .workers import capped_jobs, worker_pool
 #: Samples in flight per worker: enough to keep each busy, few enough that memory stays
 #: flat however many samples a run asks for.
 WINDOW = 4
-#: Seconds to wait for a Dask scheduler to answer.
+#: Seconds to wait for a Dask scheduler to answer, unless --scheduler-timeout says otherwise.
 SCHEDULER_TIMEOUT = 10.0
 #: What --scheduler takes: [tcp|tls|ws|wss://]HOST:PORT.
 SCHEDULER_ADDRESS = re.compile(r"((tcp|tls|ws|wss)://)?(\[[0-9a-fA-F:.]+\]|[\w.-]+):\d{1,5}/?")
@@ -222,9 +222,10 @@ def _run_local(directory: Path, todo, settings: DatasetSettings, jobs: int, adva
             advance()
 
 
-def dask_client(scheduler: str | None, jobs: int):
+def dask_client(scheduler: str | None, jobs: int, timeout: float | None = None):
     """A dask.distributed client: a LocalCluster of ``jobs`` single-threaded worker
-    processes, or the cluster at ``scheduler``."""
+    processes, or the cluster at ``scheduler`` if it answers within ``timeout`` seconds
+    (default SCHEDULER_TIMEOUT)."""
     import logging
 
     try:
@@ -233,35 +234,37 @@ def dask_client(scheduler: str | None, jobs: int):
         raise InputError("--executor dask needs dask.distributed: pip install 'dask[distributed]'") from None
     logging.getLogger("distributed").setLevel(logging.ERROR)
     if scheduler:
-        return _connect(Client, scheduler)
+        return _connect(Client, scheduler, SCHEDULER_TIMEOUT if timeout is None else timeout)
     cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None)
     client = Client(cluster)
     client._facesim_cluster = cluster
     return client
 
 
-def _connect(Client, scheduler: str):
-    """A client of the scheduler at ``scheduler``, or one line within SCHEDULER_TIMEOUT.
+def _connect(Client, scheduler: str, timeout: float):
+    """A client of the scheduler at ``scheduler``, or one line within ``timeout`` seconds.
     Client's own timeout covers the TCP connect, not the handshake: a server that accepts
     and never answers held it for ever, so the client is made in a thread we stop waiting for."""
     import threading
 
     if not SCHEDULER_ADDRESS.fullmatch(scheduler):
         raise InputError(f"--scheduler {scheduler}: expected a scheduler address such as tcp://HOST:PORT")
+    if not timeout > 0:
+        raise InputError(f"--scheduler-timeout: expected a number of seconds above 0, got {timeout:g}")
     made: dict = {}
 
     def connect():
         try:
-            made["client"] = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT}s", set_as_default=False)
+            made["client"] = Client(scheduler, timeout=f"{timeout}s", set_as_default=False)
         except Exception as exc:  # noqa: BLE001  (reported below, in the main thread)
             made["error"] = exc
 
     thread = threading.Thread(target=connect, name="facesim-dask-connect", daemon=True)
     thread.start()
-    thread.join(SCHEDULER_TIMEOUT + 2.0)
+    thread.join(timeout + 2.0)
     if "client" in made:
         return made["client"]
-    why = f"({type(made['error']).__name__})" if "error" in made else f"(no answer within {SCHEDULER_TIMEOUT:g} s)"
+    why = f"({type(made['error']).__name__})" if "error" in made else f"(no answer within {timeout:g} s)"
     raise FacesimError(f"--scheduler {scheduler}: cannot reach the Dask scheduler {why}")
 
 
@@ -330,7 +333,8 @@ def check_settings(settings: DatasetSettings) -> None:
 
 
 def build_dataset(directory: Path, n: int, settings: DatasetSettings, executor: str = "local", jobs: int = 2,
-                  scheduler: str | None = None, advance=None, warn=None) -> Path:
+                  scheduler: str | None = None, advance=None, warn=None,
+                  scheduler_timeout: float | None = None) -> Path:
     """Make (or finish) a dataset of ``n`` samples; returns the manifest's path. ``warn``
     receives one-line notices (--jobs capped to the cores)."""
     if executor not in ("local", "dask"):
@@ -344,7 +348,7 @@ def build_dataset(directory: Path, n: int, settings: DatasetSettings, executor: 
     check_settings(settings)
     if scheduler is None:  # a cluster elsewhere has its own cores
         jobs = capped_jobs(jobs, warn)
-    client = dask_client(scheduler, jobs) if executor == "dask" else None  # fail before writing anything
+    client = dask_client(scheduler, jobs, scheduler_timeout) if executor == "dask" else None  # fail before writing anything
     try:
         todo = _prepare(directory, n, settings)
     except BaseException:

@@ -118,7 +118,10 @@ def test_clips_hold_every_frame_and_end_on_the_image(tmp_path):
 @pytest.mark.parametrize("args, code, message", [
     (["--n", "0"], 2, "--n: the number of samples must be at least 1, got 0"),
     (["--n", "-3"], 2, "--n: the number of samples must be at least 1"),
-    (["--n", "2", "--executor", "dask", "--scheduler", "tcp://127.0.0.1:9"], 1, "cannot reach the Dask scheduler"),
+    (["--n", "2", "--executor", "dask", "--scheduler", "tcp://127.0.0.1:9", "--scheduler-timeout", "1"], 1,
+     "cannot reach the Dask scheduler"),
+    (["--n", "2", "--executor", "dask", "--scheduler", "tcp://127.0.0.1:9", "--scheduler-timeout", "0"], 2,
+     "--scheduler-timeout: expected a number of seconds above 0, got 0"),
     (["--n", "2", "--executor", "spark"], 2, "--executor: expected local or dask"),
 ])
 def test_bad_arguments_are_one_line(tmp_path, args, code, message):
