@@ -84,3 +84,24 @@ def model():
 @pytest.fixture()
 def rng():
     return np.random.default_rng(20261122)
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "heavy(seconds): a test that takes about this long alone (a copy of the package "
+                            "compiled, the benchmark, a wheel built): run first, so two workers finish together")
+
+
+def pytest_collection_modifyitems(items):
+    """The heavy tests first, longest first, each with the rest of its module after it (its
+    module's fixtures made once): with -n 2 the two workers share the long ones from the
+    start, instead of one of them starting a two-minute test at the end while the other idles."""
+    def weight(item):
+        mark = item.get_closest_marker("heavy")
+        return mark.args[0] if mark else 0.0
+
+    module_weight: dict = {}
+    for item in items:
+        module_weight[item.module] = max(module_weight.get(item.module, 0.0), weight(item))
+    order = {module: k for k, module in enumerate(dict.fromkeys(item.module for item in items))}
+    position = {id(item): k for k, item in enumerate(items)}
+    items.sort(key=lambda item: (-module_weight[item.module], order[item.module], -weight(item), position[id(item)]))

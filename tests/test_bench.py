@@ -10,6 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -21,6 +23,7 @@ def numbers(tree):
         yield tree
 
 
+@pytest.mark.heavy(95)
 def test_bench_quick_prints_every_table_with_sensible_figures(tmp_path):
     figures_path = tmp_path / "figures.json"
     result = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench.py"), "--quick", "--json", str(figures_path)],

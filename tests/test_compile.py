@@ -75,6 +75,7 @@ def test_a_new_users_first_render_loads_every_kernel_it_runs_and_compiles_none(t
     assert (tmp_path / "shipped" / "out.mp4").stat().st_size > 0
 
 
+@pytest.mark.heavy(70)
 def test_with_no_compiled_kernels_a_render_compiles_only_the_kernels_it_runs(tmp_path):
     """An empty cache and no shipped kernels (another machine, another Python): the
     render compiles the kernels it runs and no other: the physics' serial twins, never

@@ -102,6 +102,7 @@ def test_no_action_unit_alone_folds(alone):
     assert not any(folded(h) for h in alone.values()), report(alone, folded)
 
 
+@pytest.mark.heavy(70)
 def test_no_pair_of_action_units_folds(pairs):
     assert not any(folded(h) for h in pairs.values()), report(pairs, folded)
 

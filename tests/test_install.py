@@ -8,6 +8,7 @@ from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -18,6 +19,7 @@ def run(*command, cwd=None):
     return result
 
 
+@pytest.mark.heavy(45)
 def test_the_wheel_installs_into_a_fresh_environment_and_renders_from_another_directory(tmp_path):
     run(sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", tmp_path / "dist", ROOT)
     wheel = next((tmp_path / "dist").glob("facesim-*.whl"))

@@ -56,6 +56,7 @@ def outputs(tmp_path_factory):
     return _digests(outdir)
 
 
+@pytest.mark.heavy(45)
 def test_the_thesis_expressions_render_as_before(outputs):
     if os.environ.get("FACESIM_WRITE_GOLDEN"):
         GOLDEN.write_text(json.dumps({"size": SIZE, "backend": BACKEND, "digests": outputs}, indent=1) + "\n")

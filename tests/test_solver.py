@@ -57,6 +57,7 @@ def sag(package_root, spec, cache=None):
     return float(result.stdout.split()[-1])
 
 
+@pytest.mark.heavy(115)
 def test_a_force_term_is_one_kernel_and_one_line_and_a_changed_kernel_is_compiled_again(tmp_path):
     """Gravity added to a copy of the package as one kernel and one line (its module,
     named among the solver's terms): weightless, the face stays at rest; given its
