@@ -34,7 +34,7 @@ demo: setup
 	@echo "open out/happy.mp4"
 
 test: setup $(VENV)/.photo
-	$(BIN)/python -m pytest -n 2 --maxschedchunk 1 --durations=15
+	$(BIN)/python -m pytest -n 2 --dist loadscope --no-loadscope-reorder --durations=15
 
 bench: setup
 	$(BIN)/python scripts/bench.py

@@ -92,9 +92,11 @@ def pytest_configure(config):
 
 
 def pytest_collection_modifyitems(items):
-    """The heavy tests first, longest first, each with the rest of its module after it (its
-    module's fixtures made once): with -n 2 the two workers share the long ones from the
-    start, instead of one of them starting a two-minute test at the end while the other idles."""
+    """The heavy tests first, longest first, each with the rest of its module after it:
+    `make test` hands whole modules to its two workers in this order (xdist's loadscope,
+    so a module's fixtures are made on one worker, once), and the two share the long ones
+    from the start instead of one of them starting a two-minute test at the end while the
+    other idles."""
     def weight(item):
         mark = item.get_closest_marker("heavy")
         return mark.args[0] if mark else 0.0
