@@ -105,24 +105,26 @@ def detect_landmarks(image: np.ndarray, source: str, notice=None, refine: bool =
 @contextlib.contextmanager
 def _face_mesh(refine: bool):
     """A function giving the faces MediaPipe's face mesh finds in an image, (468, 3) pixels
-    each; one graph for every image it is given within the block (each found afresh)."""
+    each; one graph for every image it is given within the block (each found afresh).
+
+    File descriptor 2 stays silenced from the graph's start to its close: its calculators
+    open on MediaPipe's own threads, and TensorFlow Lite's "Created ... delegate" line once
+    came out after a narrower silence had ended (one CI run in many)."""
     with quiet_stderr():
         import mediapipe as mp
 
         face_mesh = mp.solutions.face_mesh.FaceMesh(
             static_image_mode=True, max_num_faces=MAX_FACES, refine_landmarks=refine, min_detection_confidence=0.5)
 
-    def faces_in(image: np.ndarray) -> list[np.ndarray]:
-        height, width = image.shape[:2]
-        with quiet_stderr():
+        def faces_in(image: np.ndarray) -> list[np.ndarray]:
+            height, width = image.shape[:2]
             result = face_mesh.process(np.ascontiguousarray(image[:, :, :3]))
-        return [np.array([(p.x * width, p.y * height, p.z * width) for p in face.landmark[:LANDMARKS]], dtype=np.float64)
-                for face in result.multi_face_landmarks or []]
+            return [np.array([(p.x * width, p.y * height, p.z * width) for p in face.landmark[:LANDMARKS]],
+                             dtype=np.float64) for face in result.multi_face_landmarks or []]
 
-    try:
-        yield faces_in
-    finally:
-        with quiet_stderr():
+        try:
+            yield faces_in
+        finally:
             face_mesh.close()
 
 
