@@ -1,6 +1,7 @@
 """The physics core: a force term is one kernel and one line (gravity is added to a copy
 of the package exactly so, a module of its own in facesim/physics with its kernel, and a
-line in solver._forces, and the face sags under it, not while it weighs nothing); and the implicit solver, at
+line in solver._forces, and the face sags under it); a changed kernel is compiled again in
+the kernels that call it; and the implicit solver, at
 one step per frame, holds each expression where the thesis's update at four does."""
 
 import os
@@ -57,36 +58,63 @@ def sag(package_root, spec, cache=None):
     return float(result.stdout.split()[-1])
 
 
-@pytest.mark.heavy(115)
-def test_a_force_term_is_one_kernel_and_one_line_and_a_changed_kernel_is_compiled_again(tmp_path):
-    """Gravity added to a copy of the package as one kernel and one line (its module,
-    named among the solver's terms): weightless, the face stays at rest; given its
-    weight by a change to its module alone, the face sags.
-    The second run is the same command with the same Numba cache and solver.py untouched,
-    so it also shows that the solver's compiled kernels, which carry the force terms
-    inside them, are compiled again when a term changes instead of loaded stale
-    (facesim.config._key_numba_cache; without it the face stayed at rest)."""
+def package_copy(tmp_path):
+    """A copy of facesim under ``tmp_path`` (its data linked, not copied), to change."""
     copy = tmp_path / "facesim"
     shutil.copytree(PROJECT_DIR / "facesim", copy, ignore=shutil.ignore_patterns("__pycache__"))
     for data in ("meshes", "expressions"):
         (copy / data).symlink_to(PROJECT_DIR / data)
-    term = copy / "physics" / "gravity.py"
-    assert GRAVITY.count("* 100.0") == 1
-    term.write_text(GRAVITY.replace("* 100.0", "* 0.0"))
+    return copy
+
+
+@pytest.mark.heavy(60)
+def test_a_force_term_is_one_kernel_and_one_line(tmp_path):
+    """Gravity added to a copy of the package as one kernel and one line (its module,
+    named among the solver's terms): the face sags under its weight, where the package
+    without it holds the same spec at rest."""
+    copy = package_copy(tmp_path)
+    (copy / "physics" / "gravity.py").write_text(GRAVITY)
     solver = (copy / "physics" / "solver.py").read_text()
     assert solver.count(ANCHOR) == 1 and solver.count(TERMS) == 1
     (copy / "physics" / "solver.py").write_text(solver.replace(ANCHOR, ANCHOR + LINE).replace(TERMS, TERMS + "    gravity,\n"))
 
     spec = tmp_path / "still.yaml"
     spec.write_text("name: still\nframes: 20\nactivations: {}\n")
-    weightless = sag(tmp_path, spec, tmp_path / "cache")
-    term.write_text(GRAVITY)
+    without = sag(PROJECT_DIR, spec)
     with_gravity = sag(tmp_path, spec, tmp_path / "cache")
-    assert abs(weightless) < 1e-9  # nothing moves a face at rest
+    assert abs(without) < 1e-9  # nothing moves a face at rest
     # a weight of 100 against the tissue springs alone (k = 300 per vertex) would sag 0.33
     # cm; the skin's springs and pinned rim hold it to less, but it sags
     assert -0.34 < with_gravity < -0.02
     assert np.isfinite(with_gravity)
+
+
+CALLEE = "from numba import njit\n\n\n@njit(cache=True)\ndef weight():\n    return {}\n"
+CALLER = "from numba import njit\n\nfrom .callee import weight\n\n\n@njit(cache=True)\ndef total():\n    return 2.0 * weight()\n"
+
+
+def test_a_changed_kernel_is_compiled_again_in_the_kernels_that_call_it(tmp_path):
+    """A compiled kernel carries the kernels it calls inside it (the solver carries every
+    force term): when only a callee's file changes, the caller, its own file untouched,
+    is compiled again from the same cache instead of loaded stale. Numba alone keys a
+    kernel by its own file and loaded the stale caller (facesim.config._key_numba_cache;
+    the solver kept a changed term's old code until it was keyed by all of facesim's)."""
+    copy = package_copy(tmp_path)
+    toy = copy / "physics" / "toy"
+    toy.mkdir()
+    (toy / "__init__.py").write_text("")
+    (toy / "caller.py").write_text(CALLER)
+    env = dict(os.environ, PYTHONPATH=str(tmp_path), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    run = [sys.executable, "-c", "import facesim.config; from facesim.physics.toy.caller import total; print(total())"]
+
+    totals = []
+    for weight in ("1.0", "5.0"):
+        (toy / "callee.py").write_text(CALLEE.format(weight))
+        result = subprocess.run(run, capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+        assert result.returncode == 0, result.stderr[-2000:]
+        totals.append(float(result.stdout.split()[-1]))
+    assert totals == [2.0, 10.0]
+    assert any((tmp_path / "cache").rglob("caller.total-*.nbi"))  # the caller was cached, in the cache given
 
 
 @pytest.mark.parametrize("name", THESIS_EXPRESSIONS)
