@@ -40,15 +40,16 @@ print(json.dumps(counts))
 SHIPPABLE = platform.machine() == "x86_64" and sys.version_info[:2] == (3, 11)
 
 
-def render_counts(tmp_path, shipped: bool, spec: str = "expressions/happy.yaml") -> dict:
-    """A render of ``spec`` on the head in a fresh process with empty caches (a new user's
-    home), with or without the shipped kernels: each kernel's [hits, misses, parallel]."""
+def render_counts(tmp_path, shipped: bool, spec: str = "expressions/happy.yaml", *options) -> dict:
+    """A render of ``spec`` on the head (or as ``options`` say) in a fresh process with
+    empty caches (a new user's home), with or without the shipped kernels: each kernel's
+    [hits, misses, parallel]."""
     home = tmp_path / ("shipped" if shipped else "none")
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "FACESIM_CACHE", "NUMBA_CPU_NAME",
                                                               "NUMBA_CPU_FEATURES")}
     env.update(HOME=str(home), XDG_CACHE_HOME=str(home / ".cache"), FACESIM_SHIPPED_KERNELS="1" if shipped else "0")
     result = subprocess.run([sys.executable, "-c", RENDER_AND_COUNT, "render", spec, "-o", str(home / "out.mp4"),
-                             "--size", "64x64"], capture_output=True, text=True, env=env, cwd=PROJECT_DIR, timeout=600)
+                             "--size", "64x64", *map(str, options)], capture_output=True, text=True, env=env, cwd=PROJECT_DIR, timeout=600)
     assert result.returncode == 0, result.stderr[-2000:]
     return json.loads(result.stdout.splitlines()[-1])
 
@@ -73,6 +74,22 @@ def test_a_new_users_first_render_loads_every_kernel_it_runs_and_compiles_none(t
     # the head's 468-vertex skin runs the twins: no parallel kernel of the physics is touched
     assert not {name for name in loaded if name.startswith("facesim.physics") and counts[name][2]}
     assert (tmp_path / "shipped" / "out.mp4").stat().st_size > 0
+
+
+@pytest.mark.skipif(not SHIPPABLE, reason="the kernels ship compiled for x86-64 and Python 3.11")
+def test_a_large_meshs_first_render_loads_the_parallel_kernels_and_compiles_none(tmp_path):
+    """A mesh of at least PARALLEL_FROM vertices (the Hopper face subdivided twice, 6,990)
+    runs the physics' parallel kernels, which ship compiled too: its first render on a
+    new machine compiled them for about 50 s."""
+    from test_own_face import subdivision
+
+    mesh, muscles = subdivision(tmp_path, 2)
+    counts = render_counts(tmp_path, True, "expressions/happy.yaml", "--mesh", mesh, "--muscles", muscles)
+    assert not {name for name, (hits, misses, _) in counts.items() if misses}  # nothing compiled
+    assert counts["facesim.physics.solver._simulate"][:2] == [1, 0]  # the variant that calls the parallel kernels
+    assert "facesim.physics.muscle_forces._muscle_frame" in {
+        name for name, (hits, _, parallel) in counts.items() if hits and parallel}
+    assert "facesim.physics.solver._simulate__serial" not in counts or counts["facesim.physics.solver._simulate__serial"][0] == 0
 
 
 @pytest.mark.heavy(70)
