@@ -111,7 +111,9 @@ def run(
     """Simulate ``activations`` (frames, M) from rest. Returns positions, kinetic energy,
     inverted-triangle counts and smallest relative areas per frame: ``out``'s arrays if
     given (``diagnostics``). The kernels' parallel loops run on ``threads`` threads: by
-    default every core Numba has for a mesh of at least ``PARALLEL_FROM`` vertices, else
+    default, for a mesh of at least ``PARALLEL_FROM`` vertices, as many as Numba gives
+    the calling thread (every core, unless the caller chose fewer with
+    ``numba.set_num_threads``: processes sharing the cores), else
     the serial twins of the kernels run (facesim.physics.twins); given ``threads``, the
     parallel kernels run on that many, on any mesh. With ``progress``, ``STREAMED_FRAMES`` frames a call, each
     reported done as soon as it is in ``out``, and the run stops early when cancelled;
@@ -139,7 +141,7 @@ def run(
     started = time.perf_counter()
     simulate = twins.for_mesh(solver._simulate, n, threads)
     if threads is None:
-        threads = numba.config.NUMBA_NUM_THREADS if twins.on_threads(n) else 1
+        threads = numba.get_num_threads() if twins.on_threads(n) else 1
     previous = numba.get_num_threads()
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     try:
