@@ -28,20 +28,25 @@ def worker_pool(jobs: int):
     from concurrent.futures import ProcessPoolExecutor
 
     return ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"), initializer=_start_worker,
-                               initargs=(os.getpid(), max(1, available_cores() // jobs)))
+                               initargs=(os.getpid(), jobs))
 
 
-def _start_worker(parent: int, threads: int) -> None:
-    """Initializer of every worker process: ``die_with_parent``, and the kernels' parallel
-    loops on ``threads`` threads (facesim.physics.run takes Numba's count for this
-    thread). Every worker on every core waited on the others: `batch --jobs 2` of four
-    expressions on the Hopper face subdivided twice (6,990 vertices) took 24.0-26.0 s
-    wall and 43-45 s of CPU on two cores, 9.9-10.4 s and 16-17 s with a thread each
-    (2026-12-06)."""
+def _start_worker(parent: int, jobs: int) -> None:
+    """Initializer of every worker process of a pool of ``jobs``: ``die_with_parent``,
+    and ``share_the_cores``."""
     die_with_parent(parent)
+    share_the_cores(jobs)
+
+
+def share_the_cores(processes: int) -> None:
+    """Run this thread's parallel kernels on its share of the cores, ``processes`` processes
+    sharing them (facesim.physics.run takes Numba's count for the calling thread). Every
+    process on every core waited on the others: `batch --jobs 2` of four expressions on
+    the Hopper face subdivided twice (6,990 vertices) took 24.0-26.0 s wall and 43-45 s
+    of CPU on two cores, 9.9-10.4 s and 16-17 s with a thread each (2026-12-06)."""
     import numba
 
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(max(1, min(numba.config.NUMBA_NUM_THREADS, available_cores() // processes)))
 
 
 def die_with_parent(parent: int) -> None:

@@ -93,11 +93,9 @@ def pytest_configure(config):
     # that asks for threads (run(threads=2)) still gets them
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
     if workers > 1:
-        import numba
+        from facesim.workers import share_the_cores
 
-        from facesim.workers import available_cores
-
-        numba.set_num_threads(max(1, min(numba.config.NUMBA_NUM_THREADS, available_cores() // workers)))
+        share_the_cores(workers)
     config.addinivalue_line("markers", "heavy(seconds): a test that takes about this long alone (a copy of the package "
                             "compiled, the benchmark, a wheel built): run first, so two workers finish together")
 

@@ -105,12 +105,12 @@ def test_a_changed_kernel_is_compiled_again_in_the_kernels_that_call_it(tmp_path
     (toy / "__init__.py").write_text("")
     (toy / "caller.py").write_text(CALLER)
     env = dict(os.environ, PYTHONPATH=str(tmp_path), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    run = [sys.executable, "-c", "import facesim.config; from facesim.physics.toy.caller import total; print(total())"]
+    command = [sys.executable, "-c", "import facesim.config; from facesim.physics.toy.caller import total; print(total())"]
 
     totals = []
     for weight in ("1.0", "5.0"):
         (toy / "callee.py").write_text(CALLEE.format(weight))
-        result = subprocess.run(run, capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+        result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
         assert result.returncode == 0, result.stderr[-2000:]
         totals.append(float(result.stdout.split()[-1]))
     assert totals == [2.0, 10.0]
