@@ -359,12 +359,12 @@ def shapes(
     from rich.console import Console
     from rich.table import Table
 
-    from .animation.arkit import ARKIT_52, ICT_ALIASES, missing, shape_facs
+    from .animation.arkit import ARKIT_52, ICT_ALIASES, shape_facs
     from .animation.timeline import ACTION_UNITS, ONE_SIDED, au_muscles
     from .config import DEFAULT_MESH, muscles_file
     from .face.loading import load_face
     from .face.muscle_file import load_muscles
-    from .physics.muscles import JAW_CONTROLS, PUPIL
+    from .physics.muscles import JAW_CONTROLS, PUPIL, TONGUE
 
     mesh = mesh or DEFAULT_MESH
     names = load_muscles(muscles_file(muscles), load_face(mesh)).names
@@ -373,6 +373,7 @@ def shapes(
         if unit in names:  # a control FACS has no unit for
             return ("the control: the pupil's radius, drawn by the renderer" if unit.startswith(PUPIL) else
                     "the control: the jaw's rig (the mandible, the lips, the mouth's air)" if unit in JAW_CONTROLS else
+                    "the control: the tongue's rig, drawn by the renderer" if unit in TONGUE else
                     "the control")
         try:
             return ", ".join(f"{m} {w:g}" if w != 1 else m for m, w in au_muscles(unit, names).items())
@@ -388,9 +389,6 @@ def shapes(
     extra = [name for name in aliases if name not in ARKIT_52]
     for name in [*ARKIT_52, *extra]:
         ict = ", ".join(n for n in aliases.get(name, []) if n != name) or ("" if name not in ICT_ALIASES else name)
-        if missing(name):
-            table.add_row(name if name in ARKIT_52 else "", ict, "", f"not simulated yet: needs {missing(name)}")
-            continue
         unit = shape_facs(name)
         table.add_row(name if name in ARKIT_52 else "", ict or (name if name not in ARKIT_52 else ""), unit, drives(unit))
     units = Table(title="FACS action units (a spec's aus:, A-E or 0-1; _L or _R for one side)")

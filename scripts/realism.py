@@ -42,11 +42,14 @@ from facesim.animation.calibration import (  # noqa: E402
     MOVES,
     ON_TOP,
     ONSET,
+    TONGUE_PAST,
     TOP,
     compare,
     ict_displacement,
     ict_fields,
     row_control,
+    tongue_in_teeth,
+    tongue_past_incisors,
 )
 from facesim.config import HEAD_MUSCLES, HOPPER_MESH  # noqa: E402
 
@@ -177,6 +180,9 @@ class Table:
         for row in names:
             theirs = ict_displacement(shapes, row) if row in ICT_ROWS else None
             made_of = " + ".join(ICT_ROWS[row]) if row in ICT_ROWS else "(no ICT shape)"
+            if row == "tongueOut":
+                self.tongue_row(row)
+                continue
             animation = simulated(row)
             iris = animation is not None and row.startswith("PupilDilate")  # the irises alone: compared over them
             if not iris and (animation is None or theirs is None or not np.abs(theirs[:FACE_AREA]).max() > 0):
@@ -222,6 +228,29 @@ class Table:
             self.other_rows.append(f"| {row} | " + " | ".join(cells) + " |")
             print(self.other_rows[-1], flush=True)
 
+    def tongue_row(self, row: str) -> None:
+        """ARKit's tongueOut, which ICT lacks, held to anatomy (issue 46): shown as FACS's
+        AU19 (the jaw opened with it), the tip's place in front of the lower incisors, and
+        the tongue's points inside a tooth at the last frame and over the jaw's whole range
+        at full protrusion."""
+        animation = simulated("AU19")
+        figure, head, last = animation.figure, animation.model.mesh.head, animation.frames - 1
+        moved = animation.head_at(last)
+        past = tongue_past_incisors(figure, head, moved)
+        inside = tongue_in_teeth(figure, head, moved) + sum(
+            tongue_in_teeth(figure, head, figure.positions(animation.model.rest_position, angle, (0.0, 0.0),
+                                                           np.r_[np.zeros(6), 1.0, up]))
+            for angle in np.radians(np.linspace(0.0, 20.0, 11)) for up in (0.0, 1.0))
+        inverted = int(animation.inverted.max())
+        ok = past >= TONGUE_PAST and inside == 0 and inverted == 0
+        self.passed += ok
+        self.rows.append(f"| {row} | (no ICT shape: anatomy) | tongue_out (as AU19, the jaw at 0.5) | tip {past:.2f} cm "
+                         f"past the lower incisors (at least {TONGUE_PAST:g}) | {inside} points inside a tooth (none "
+                         f"allowed, the jaw from 0 to 20 degrees) | | | | {inverted} | {'passes' if ok else 'fails'} |")
+        print(self.rows[-1], flush=True)
+        renderer, crop, _ = self.drawing
+        self.panels.append((row, f"tip {past:.1f} cm past the incisors", crop(renderer.render_figure(moved)), None, None))
+
     def table(self) -> str:
         return ("| row | ICT shapes | simulated as | cosine | amplitude | peak ratio | facesim peak (mm) | ICT peak (mm) "
                 "| inverted triangles | |\n|---|---|---|---|---|---|---|---|---|---|\n" + "\n".join(self.rows) + "\n")
@@ -264,14 +293,18 @@ def main() -> int:
         "`docs/au_atlas.png`.\n\n"
         f"**{units.passed} of {len(units.names)} action units within the bounds.**\n\n" + units.table() + "\n"
         "## Every shape of ICT's, alone\n\n"
-        "Each of ICT FaceKit's 57 expression shapes (ARKit's 52 but tongueOut, with cheekRaiser and PupilDilate) "
+        "Each of ICT FaceKit's 57 expression shapes (ARKit's 52 but tongueOut, with cheekRaiser and PupilDilate), "
+        "and ARKit's tongueOut, "
         "simulated as the control it stands for (`facesim shapes`; facesim.animation.arkit): a side alone "
         "(mouthSmile_L is FACS's AU12_L, the muscles of the subject's left), the jaw's glides (AU29, AU30), "
         "against ICT's shape for it, measured as above; mouthClose, which corrects jawOpen, on top of it against "
         "the same on ICT's. The gaze shapes (eyeLook) are held to the lids' direction alone: their amplitude over "
         "the face area is the head's follow spreading a lid landmark's motion (at the landmarks, looking up or down "
         "moves the lids 1.05-1.13 of ICT's), and ICT's eyeballs do not turn. The pupils' dilation moves nothing on "
-        "the face area; tongueOut has no ICT shape. Atlas: `docs/shape_atlas.png`.\n\n"
+        "the face area. tongueOut has no ICT shape: it is held to anatomy, shown as FACS's AU19 (the jaw at 0.5), "
+        "its tip at least 1 cm in front of the lower incisors' labial face and no point of the tongue (vertex or "
+        "triangle centroid) inside a tooth's convex hull, at its last frame and at full protrusion with the jaw "
+        "from 0 to 20 degrees, tip raised or not. Atlas: `docs/shape_atlas.png`.\n\n"
         f"**{shapes_table.passed} of {len(shapes_table.names)} shapes within the bounds.**\n\n" + shapes_table.table() + "\n"
         "## The same muscles on other faces\n\n"
         "The default head's muscle file carried unchanged (no retuning) to ICT's identities 1-5 (the head's "

@@ -13,8 +13,8 @@ and of FACS's ``AU12_L``).
 The map follows ICT FaceKit's FACS table (its README): ``mouthShrugUpper`` is its AU10,
 ``mouthUpperUp`` its AU11, ``cheekSquint`` its AU6. ICT's ``cheekRaiser_L`` is a second
 scan of the same unit and maps to AU6_L too; ICT splits ARKit's ``browInnerUp`` into its
-two sides (``browInnerUp_L``: AU1_L). Shapes whose anatomy facesim does not simulate
-yet name what is missing (``NOT_SIMULATED``) and are refused, never silently dropped.
+two sides (``browInnerUp_L``: AU1_L). ARKit's ``tongueOut``, which ICT lacks, drives the
+tongue's rig (facesim.face.figure.Tongue).
 """
 
 from __future__ import annotations
@@ -56,13 +56,10 @@ _WHOLE = {
     "eyeLookUpLeft": "AU63_L", "eyeLookDownLeft": "AU64_L", "eyeLookOutLeft": "AU61_L", "eyeLookInLeft": "AU62_L",
     "eyeLookUpRight": "AU63_R", "eyeLookDownRight": "AU64_R", "eyeLookOutRight": "AU62_R", "eyeLookInRight": "AU61_R",
     "cheekPuff": "AU34",
+    # the tongue alone, as ARKit's shapes are captured apart from jawOpen (FACS's AU19
+    # opens the jaw with it)
+    "tongueOut": "tongue_out",
 }
-
-#: Shapes facesim has no anatomy for yet, and what each needs.
-NOT_SIMULATED = {
-    "tongueOut": "the tongue as a rigged part (AU19)",
-}
-
 
 def _facs(name: str) -> str | None:
     for stem, unit in _PAIRED.items():
@@ -74,7 +71,7 @@ def _facs(name: str) -> str | None:
 
 #: ARKit name -> its FACS form (or, with none, the control it drives), for the shapes
 #: facesim simulates.
-ARKIT_FACS = {name: _facs(name) for name in ARKIT_52 if name not in NOT_SIMULATED}
+ARKIT_FACS = {name: _facs(name) for name in ARKIT_52}
 
 #: ICT FaceKit's 57 shape names -> the ARKit name or FACS form they stand for.
 ICT_ALIASES = {
@@ -94,20 +91,13 @@ ICT_ALIASES = {
 SHAPE_NAMES = tuple(ARKIT_52) + tuple(n for n in ICT_ALIASES if n not in ARKIT_52)
 
 
-def missing(name: str) -> str | None:
-    """What a shape facesim does not simulate yet needs; None for any other name."""
-    return NOT_SIMULATED.get(name) or NOT_SIMULATED.get(ICT_ALIASES.get(name, name))
-
-
 def shape_facs(name: str) -> str:
     """The FACS form (``AU12_L``) an ARKit or ICT shape name stands for, or the control
     it drives where FACS has no unit for it (``lip_seal``); ValueError for an unknown
-    name or a shape facesim does not simulate yet."""
+    name."""
     arkit = ICT_ALIASES.get(name, name)
     if arkit.startswith(("AU", PUPIL)):
         return arkit
-    if missing(name):
-        raise ValueError(f"{name} is not simulated yet (it needs {missing(name)})")
     if arkit not in ARKIT_FACS:
         raise ValueError(f"{name!r} is not an ARKit or ICT FaceKit shape name (see `facesim shapes`)")
     return ARKIT_FACS[arkit]

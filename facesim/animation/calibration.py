@@ -181,3 +181,46 @@ def hold_row(model, row: str, figure=None, frames: int = FRAMES) -> Held:
     base = hold(model, ON_TOP[row], frames=frames, figure=figure)
     both = hold(model, (ON_TOP[row], unit), frames=frames, figure=figure)
     return replace(both, displacement=both.displacement - base.displacement)
+
+
+#: ARKit's tongueOut has no ICT shape: it is held to anatomy instead (issue 46), shown as
+#: FACS's AU19 (the jaw opened with it), its tip at least TONGUE_PAST (cm) in front of the
+#: lower incisors' labial face, and nothing of the tongue inside a tooth.
+TONGUE_PAST = 1.0
+
+
+def teeth_pieces(head) -> list[np.ndarray]:
+    """Each of the head's teeth as its vertices (ICT's M_Teeth: a connected piece a tooth)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    edges = head.triangles_of("M_Teeth")[:, [0, 1, 1, 2]].reshape(-1, 2)
+    n = len(head.vertices)
+    _, label = connected_components(coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
+                                    directed=False)
+    rows = head.part("teeth")
+    return [rows[label[rows] == k] for k in np.unique(label[rows])]
+
+
+def lower_incisors(figure, head) -> np.ndarray:
+    """The vertices of the teeth that turn with the mandible whole, at the front."""
+    whole = set(figure.jaw_rows[figure.jaw_weight == 1.0].tolist())
+    return np.concatenate([t for t in teeth_pieces(head) if t[0] in whole and figure.rest[t, 2].max() > 10.0])
+
+
+def tongue_past_incisors(figure, head, x: np.ndarray) -> float:
+    """How far (cm, forward) the tongue's tip lies in front of the lower incisors, the
+    head's vertices at ``x`` (negative: behind them)."""
+    return float(x[figure.tongue.rows, 2].max() - x[lower_incisors(figure, head), 2].max())
+
+
+def tongue_in_teeth(figure, head, x: np.ndarray) -> int:
+    """How many of the tongue's vertices and triangles' centroids lie inside a tooth (its
+    convex hull), the head's vertices at ``x``."""
+    from scipy.spatial import Delaunay
+
+    rows = figure.tongue.rows
+    triangles = head.triangles_of("M_GumsTongue")
+    triangles = triangles[np.isin(triangles, rows).all(axis=1)]
+    points = np.vstack([x[rows], x[triangles].mean(axis=1)])
+    return sum(int(np.count_nonzero(Delaunay(x[tooth]).find_simplex(points) >= 0)) for tooth in teeth_pieces(head))

@@ -21,13 +21,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import SimulationError
+from ..errors import InputError, SimulationError
 from ..face.figure import figure_for
-from ..face.head import identity_notice
+from ..face.head import HeadMesh, identity_notice
 from ..face.loading import load_face_model
 from ..geometry import rotation
 from ..physics.model import Model
-from ..physics.muscles import GAZE_ANGLE, PUPIL
+from ..physics.muscles import GAZE_ANGLE, PUPIL, TONGUE
 from ..physics.run import Progress, diagnostics, muscle_forces, run
 from ..physics.twins import on_threads
 from ..timings import phase
@@ -196,29 +196,39 @@ def check_moved(model: Model, table: np.ndarray, moved: float, source: str) -> N
 
 
 def _posed(pose: np.ndarray | None, look: np.ndarray | None) -> np.ndarray | None:
-    """The pose table (frames, 5), with each eye's turn from the gaze controls after it
-    (frames, 11) when they act."""
+    """The pose table (frames, 5), with the drawn controls after it (``look_table``:
+    frames, 13) when they act."""
     if look is None:
         return pose
     return np.column_stack([np.zeros((len(look), 5)) if pose is None else pose, look])
 
 
 def look_table(model: Model, table: np.ndarray) -> np.ndarray | None:
-    """(frames, 6) each eye's turn in degrees from the gaze controls (yaw toward the
-    subject's left, pitch up; the subject's left eye, then the right), their activations
-    times ``GAZE_ANGLE``, then each pupil's dilation (0-1, left, right): what the
-    renderer turns the eyeballs by, on top of the pose's gaze, and opens the pupils by;
-    None when no gaze or pupil control acts."""
+    """(frames, 8) the controls the renderer draws rather than the skin simulates: each
+    eye's turn in degrees from the gaze controls (yaw toward the subject's left, pitch
+    up; the subject's left eye, then the right), their activations times ``GAZE_ANGLE``,
+    each pupil's dilation (0-1, left, right), and the tongue's protrusion and tip raise
+    (0-1: facesim.face.figure.Tongue), on top of the pose's gaze; None when none acts."""
     columns = model.rig.gaze_column
-    look = np.zeros((len(table), 6))
+    look = np.zeros((len(table), 8))
     for eye in range(2):
         if columns[eye, 0] >= 0:
             up, down, left, right = (table[:, columns[eye, g]] * GAZE_ANGLE[g] for g in range(4))
             look[:, 2 * eye], look[:, 2 * eye + 1] = left - right, up - down
-    for eye, side in enumerate("lr"):
-        if f"{PUPIL}_{side}" in model.muscles.names:
-            look[:, 4 + eye] = np.clip(table[:, model.muscles.index(f"{PUPIL}_{side}")], 0.0, 1.0)
+    drawn = [f"{PUPIL}_l", f"{PUPIL}_r", *TONGUE]
+    for k, control in enumerate(drawn):
+        if control in model.muscles.names:
+            look[:, 4 + k] = np.clip(table[:, model.muscles.index(control)], 0.0, 1.0)
     return look if look.any() else None
+
+
+def check_tongue(model: Model, table: np.ndarray, source: str) -> None:
+    """InputError when the tongue's controls act on a face with no tongue to draw (a
+    mask: the Hopper face, a mesh from a photo): they would move nothing."""
+    acting = [c for c in TONGUE if c in model.muscles.names and table[:, model.muscles.index(c)].any()]
+    if acting and not isinstance(model.mesh, HeadMesh):
+        raise InputError(f"{source}: {', '.join(acting)} (AU19, tongueOut) move the tongue of ICT's head, and this face "
+                         "is a mask with none: render it on the default head")
 
 
 def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background: bool = False,
@@ -245,6 +255,7 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
     with phase("model"):
         model = model_for(spec)
     table = activation_table(spec, model.muscles)
+    check_tongue(model, table, spec.source)
     unusual = identity_notice(spec.identity)  # weights the spec gives (a face directory's are its fit's)
     if notice and unusual:
         notice(f"{spec.source}: {unusual}")

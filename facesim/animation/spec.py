@@ -206,7 +206,7 @@ class Spec(Strict):
     @classmethod
     def _shapes(cls, arkit):
         for name in arkit:
-            shape_facs(name)  # a ValueError names an unknown shape, or one not simulated yet
+            shape_facs(name)  # a ValueError names an unknown shape
         return arkit
 
     @field_validator("expressions")

@@ -8,7 +8,8 @@ the figure's vertices, in four linear steps:
 1. ``follow``: vertices that ride the skin take a fixed linear combination of the
    simulation's displacements (for a bare mask, its own vertices one for one);
 2. ``jaw``: vertices on the mandible (lower teeth, tongue, the floor of the mouth) turn
-   with it about the hinge and glide with its condyles, by their weight;
+   with it about the hinge and glide with its condyles, by their weight; the tongue
+   protrudes and raises its tip in the mandible's frame (:class:`Tongue`);
 3. ``eyes``: each eyeball turns about its centre for the gaze;
 4. the skin around each eye is kept outside its eyeball (a contact, as the lids slide).
 
@@ -37,6 +38,7 @@ from ..physics.mesh import FaceMesh, smooth_interpolation, unique_edges
 from ..physics.rig import LID_GAP
 from .colours import BROWS, CARUNCLE, GUMS, IRIS, LASHES, LIPS, MOUTH_SOCKET, PUPIL, SCLERA, SKIN, TEETH
 from .head import Head, HeadMesh
+from .tongue import TONGUE_ROOT, Tongue, tongue_rig
 
 #: ICT's parts drawn, with the colour (None: per vertex, see head_figure) and roughness of
 #: each; the lacrimal fluid, eye blend and eye occlusion shells exist for a shader's
@@ -98,6 +100,21 @@ class Pupil:
         return self.outward * (moved - self.radius)[:, None] + rise[:, None] * self.axis
 
 
+#: ICT's tongue: the UV island of M_GumsTongue that holds this vertex, its tip (the
+#: dorsum, which wraps round the tip onto the underside: 451 vertices from the root at
+#: z 3.4 cm to the tip at z 9.75, behind the lower incisors and below their edge).
+TONGUE_TIP = 16761
+
+
+def _tongue_rows(head: Head) -> np.ndarray:
+    """The tongue's vertices (TONGUE_TIP's island)."""
+    rows = drawn_rows(head, "M_GumsTongue")
+    triangles, uv = head.triangles[rows], head.triangle_uv[rows]
+    tip_uv = uv[triangles == TONGUE_TIP][0]
+    island = next(i for i in _components(uv, np.unique(uv)) if tip_uv in i)
+    return np.unique(triangles[np.isin(uv, island).all(axis=1)])
+
+
 def _pupil(x: np.ndarray, head: Head, side: str) -> Pupil:
     centre, axis, iris = _iris_axis(x, head, side)
     d = x[iris] - centre
@@ -119,7 +136,8 @@ class Figure:
     follow_gain : (n,) each simulated vertex's displacement scaled by it first; jaw_rows, jaw_weight : (j,);
     jaw_hinge, jaw_axis : (3,); eyes : (rows, centre) per eyeball; guards : (rows,
     centre, radius) per eye, skin kept outside it; neck : (3,) the head's pivot; pupils :
-    per eye, ``Pupil``: the iris vertices a dilating pupil moves."""
+    per eye, ``Pupil``: the iris vertices a dilating pupil moves; tongue : ``Tongue``, its
+    rig, or None."""
 
     rest: np.ndarray
     colour: np.ndarray
@@ -137,6 +155,7 @@ class Figure:
     guards: tuple
     neck: np.ndarray
     pupils: tuple = ()
+    tongue: Tongue | None = None
 
     @property
     def triangles(self) -> np.ndarray:
@@ -145,9 +164,10 @@ class Figure:
     def positions(self, sim: np.ndarray, jaw=0.0, gaze: tuple[float, float] = (0.0, 0.0), look=None) -> np.ndarray:
         """(N, 3): the figure for simulated positions ``sim`` (n, 3), the jaw (its angle
         in radians, or (4,): the angle and its glide in cm, as Animation.jaw), the gaze
-        (yaw, pitch in degrees) and each eye's own turn on top of it (``look``, (4,): the
+        (yaw, pitch in degrees) and each eye's own turn on top of it (``look``, (8,): the
         subject's left eye's yaw and pitch, then the right's, then each pupil's dilation,
-        0-1, left and right; facesim.animation.simulate.look_table)."""
+        0-1, left and right, then the tongue's protrusion and tip raise, 0-1;
+        facesim.animation.simulate.look_table)."""
         jaw = np.atleast_1d(np.asarray(jaw, dtype=np.float64))
         jaw_angle, glide = jaw[0], jaw[1:4]
         x = np.empty_like(self.rest)
@@ -160,6 +180,9 @@ class Figure:
             x[self.jaw_rows] += self.jaw_weight[:, None] * (turned - rest)
         if glide.any() and len(self.jaw_rows):
             x[self.jaw_rows] += self.jaw_weight[:, None] * glide
+        if self.tongue is not None and look is not None and len(look) > 7 and (look[6] or look[7]):
+            moved = self.tongue.displaced(look[6], look[7], jaw_angle)  # in the mandible's frame: turned with it
+            x[self.tongue.rows] += moved @ axis_rotation(self.jaw_axis, jaw_angle).T if jaw_angle else moved
         if look is not None and len(look) > 4:
             for pupil in self.pupils:
                 opening = look[4] if pupil.centre[0] > 0 else look[5]
@@ -376,6 +399,9 @@ def head_figure(head: Head, model) -> Figure:
         weight[np.isin(lower_rows, rows)] = float(x[rows, 1].mean() < np.mean([x[r, 1].mean() for r in teeth_components]))
     socket_part = np.isin(lower_rows, mouth)
     weight[socket_part] *= np.isin(lower_rows[socket_part], deep_mouth)
+    tongue = tongue_rig(x, _tongue_rows(head))  # on the floor of the mouth: all of it that its rig moves turns with the mandible
+    in_tongue = np.isin(lower_rows, tongue.rows)
+    weight[in_tongue] = np.maximum(weight[in_tongue], np.clip((x[lower_rows[in_tongue], 2] - TONGUE_ROOT + 2.0) / 2.0, 0, 1))
 
     colour = np.tile(np.array(SKIN), (len(x), 1))
     lips = _lip_colour(x, head, np.arange(n_face))
@@ -411,7 +437,7 @@ def head_figure(head: Head, model) -> Figure:
         rest=x, colour=colour.astype(np.float32), parts=tuple(parts), sim_rest=np.asarray(sim_rest), anchor=head.landmarks,
         follow_rows=follow_rows, follow=follow, follow_gain=gain, jaw_rows=lower_rows[weight > 0], jaw_weight=weight[weight > 0],
         jaw_hinge=model.rig.jaw_hinge, jaw_axis=model.rig.jaw_axis, eyes=tuple(eyes), guards=tuple(guards), neck=np.array(HEAD_NECK),
-        pupils=tuple(_pupil(x, head, side) for side in ("left", "right")),
+        pupils=tuple(_pupil(x, head, side) for side in ("left", "right")), tongue=tongue,
     )
 
 

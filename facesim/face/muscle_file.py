@@ -25,7 +25,18 @@ from pydantic import Field, StrictInt, field_validator, model_validator
 from ..config import MIDLINE_FRACTION, SNAP_FRACTION
 from ..errors import InputError
 from ..physics.mesh import FaceMesh
-from ..physics.muscles import GAZE, JAW_CONTROLS, LINEAR, PUFF_PRESSURE, PUPIL, SPHINCTER, EyelidRig, JawRig, MuscleSet
+from ..physics.muscles import (
+    GAZE,
+    JAW_CONTROLS,
+    LINEAR,
+    PUFF_PRESSURE,
+    PUPIL,
+    SPHINCTER,
+    TONGUE,
+    EyelidRig,
+    JawRig,
+    MuscleSet,
+)
 from ..schema import Strict, load_model
 
 #: A landmark: a vertex index (an integer: YAML's ``true`` is not vertex 1) or a 3D point.
@@ -178,7 +189,7 @@ class MuscleFile(Strict):
 
     @model_validator(mode="after")
     def _unique_names(self):
-        seen = set(JAW_CONTROLS) if self.jaw else set()
+        seen = set(JAW_CONTROLS + TONGUE) if self.jaw else set()
         levators = [e.levator for e in self.eyelids if e.levator]
         for name in [m.name for m in self.muscles] + [e.name for e in self.eyelids] + levators:
             if name in seen:
@@ -295,7 +306,7 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         _upper_over_lower(mesh, upper, lower, where)
         jaw = JawRig(hinge, lower, upper, float(np.radians(spec.jaw.max_angle)), float(np.radians(spec.jaw.contact_tilt)),
                      spec.jaw.protrusion, spec.jaw.excursion, spec.jaw.puff_pressure)
-        controls += JAW_CONTROLS
+        controls += JAW_CONTROLS + TONGUE  # the tongue rides the mandible
     eyelids = []
     for lid in spec.eyelids:
         where = f"{source}: eyelid {lid.name}"

@@ -83,6 +83,11 @@ GAZE = ("gaze_up", "gaze_down", "gaze_left", "gaze_right")
 #: eyeLook shapes at full weight; the eyes' range is larger (up 45-50, down 60, to
 #: either side 50 degrees), but gazes beyond 30 degrees come with the head.
 GAZE_ANGLE = (25.0, 30.0, 30.0, 30.0)
+#: The tongue's controls, each 0-1, carried by the mandible and drawn by the renderer
+#: (facesim.face.figure.Tongue): ``tongue_out`` protrudes it (the genioglossus: FACS's
+#: AU19, ARKit's tongueOut), ``tongue_up`` raises its tip toward the alveolar ridge (the
+#: superior longitudinal muscle: the /l/ and /t/ of speech).
+TONGUE = ("tongue_out", "tongue_up")
 #: An eye's pupil dilation control, 0-1, per eye with ``_l`` or ``_r`` (ICT's
 #: PupilDilate_L/_R; ARKit has none): drawn by the renderer (facesim.face.figure.Pupil).
 PUPIL = "pupil_dilate"
