@@ -3,14 +3,23 @@ a new user's first render loads every kernel it runs from them and compiles none
 with no compiled kernels at all a render compiles only the kernels it runs: the serial
 twins of the physics for the head's small skin (facesim.physics.twins), no parallel
 variant and nothing of the photo look. Asserted from Numba's dispatcher statistics,
-not from timings."""
+not from timings.
+
+And what a change compiles: a force term is one kernel and one line (gravity added to a
+copy of the package exactly so, a module of its own in facesim/physics with its kernel
+and a line in solver._forces, and the face sags under it), and a changed kernel is
+compiled again in the kernels that call it. The copy with gravity is the package the
+empty-cache render compiles: one compile of the physics (a minute) serves both."""
 
 import json
 import os
 import platform
+import shutil
 import subprocess
 import sys
+import textwrap
 
+import numpy as np
 import pytest
 
 from facesim.config import PROJECT_DIR, SHIPPED_KERNELS, shipped_kernels_key
@@ -37,20 +46,82 @@ for kernel in kernels.values():
                     bool(kernel.targetoptions.get("parallel"))]
 print(json.dumps(counts))
 """
+GRAVITY = '''"""A toy term: gravity."""
+
+from numba import njit
+
+from ..config import NUMBA_OPTIONS
+
+
+@njit(**NUMBA_OPTIONS)
+def _gravity_forces(model, forces):
+    """A toy term: a weight on every vertex, m g downward (g = 100 in facesim's units)."""
+    for i in range(forces.force.shape[0]):
+        forces.force[i, 1] -= model.mass * 100.0
+'''
+LINE = "    gravity._gravity_forces(model, forces)  # a toy term\n"
+TERMS = "from . import (\n"
+ANCHOR = "    muscle_forces._muscle_forces(model, xp, control, work, forces)  # eq. 3.1-3.4, 3.21-3.25\n"
+
+SAG = textwrap.dedent("""
+    import numpy as np
+    from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
+    from facesim.animation.simulate import simulate
+    from facesim.animation.spec import load_spec
+    spec = load_spec("{spec}").with_overrides(mesh=HOPPER_MESH, muscles=HOPPER_MUSCLES)
+    animation = simulate(spec)
+    free = ~animation.model.pinned
+    print(float((animation.positions[-1] - animation.rest)[free, 1].mean()))
+""")
+
+
+#: A face at rest: nothing contracts.
+STILL = PROJECT_DIR / "tests" / "data" / "still.yaml"
+
+
+def sag(package_root, spec, env=None):
+    """Mean vertical displacement (cm) of the free vertices at the last frame of ``spec``,
+    simulated by the facesim found under ``package_root``, in the environment ``env``
+    (default: this one, the suite's compiled kernels)."""
+    env = dict(os.environ if env is None else env, PYTHONPATH=str(package_root))
+    result = subprocess.run([sys.executable, "-c", SAG.format(spec=spec)], capture_output=True, text=True, env=env,
+                            cwd=package_root, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    return float(result.stdout.split()[-1])
+
+
+def package_copy(tmp_path):
+    """A copy of facesim under ``tmp_path`` (its data linked, not copied), to change."""
+    copy = tmp_path / "facesim"
+    shutil.copytree(PROJECT_DIR / "facesim", copy, ignore=shutil.ignore_patterns("__pycache__"))
+    for data in ("meshes", "expressions"):
+        (copy / data).symlink_to(PROJECT_DIR / data)
+    return copy
+
+
 SHIPPABLE = platform.machine() == "x86_64" and sys.version_info[:2] == (3, 11)
 
 
-def render_counts(tmp_path, shipped: bool, spec: str = "expressions/happy.yaml", *options) -> dict:
-    """A render of ``spec`` on the head (or as ``options`` say) in a fresh process with
-    empty caches (a new user's home), with or without the shipped kernels: each kernel's
-    [hits, misses, parallel]."""
-    home = tmp_path / ("shipped" if shipped else "none")
+def fresh_env(home, shipped: bool) -> dict:
+    """This environment as a new user's: ``home`` new (empty caches, Numba's in it), the
+    CPU not named, with or without the shipped kernels."""
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "FACESIM_CACHE", "NUMBA_CPU_NAME",
                                                               "NUMBA_CPU_FEATURES")}
     env.update(HOME=str(home), XDG_CACHE_HOME=str(home / ".cache"), FACESIM_SHIPPED_KERNELS="1" if shipped else "0")
-    result = subprocess.run([sys.executable, "-c", RENDER_AND_COUNT, "render", spec, "-o", str(home / "out.mp4"),
-                             "--size", "64x64", *map(str, options)],
-                            capture_output=True, text=True, env=env, cwd=PROJECT_DIR, timeout=600)
+    return env
+
+
+def render_counts(tmp_path, shipped: bool, spec: str = "expressions/happy.yaml", *options, package=None) -> dict:
+    """A render of ``spec`` on the head (or as ``options`` say) in a fresh process with
+    empty caches (a new user's home), with or without the shipped kernels, by the facesim
+    under ``package`` (default: this one): each kernel's [hits, misses, parallel]."""
+    home = tmp_path / ("shipped" if shipped else "none")
+    env = fresh_env(home, shipped)
+    if package is not None:
+        env["PYTHONPATH"] = str(package)
+    result = subprocess.run([sys.executable, "-c", RENDER_AND_COUNT, "render", str(PROJECT_DIR / spec), "-o",
+                             str(home / "out.mp4"), "--size", "64x64", *map(str, options)],
+                            capture_output=True, text=True, env=env, cwd=package or PROJECT_DIR, timeout=600)
     assert result.returncode == 0, result.stderr[-2000:]
     return json.loads(result.stdout.splitlines()[-1])
 
@@ -94,17 +165,35 @@ def test_a_large_meshs_first_render_loads_the_parallel_kernels_and_compiles_none
     assert serial[0] == 0  # the head's serial twin, not run
 
 
-@pytest.mark.heavy(70)
-def test_with_no_compiled_kernels_a_render_compiles_only_the_kernels_it_runs(tmp_path):
+@pytest.fixture(scope="module")
+def compiled_copy(tmp_path_factory):
+    """A copy of the package with gravity added as one kernel and one line, compiled from
+    nothing, once for the module's tests (a compile of the physics takes a minute): a
+    blink rendered on the head in a fresh process with an empty cache and no shipped
+    kernels (its kernels' statistics), then in another process, loading what that one
+    compiled, the still spec's sag on the Hopper face."""
+    root = tmp_path_factory.mktemp("copy")
+    copy = package_copy(root)
+    (copy / "physics" / "gravity.py").write_text(GRAVITY)
+    solver = (copy / "physics" / "solver.py").read_text()
+    assert solver.count(ANCHOR) == 1 and solver.count(TERMS) == 1
+    (copy / "physics" / "solver.py").write_text(solver.replace(ANCHOR, ANCHOR + LINE).replace(TERMS, TERMS + "    gravity,\n"))
+    counts = render_counts(root, False, str(PROJECT_DIR / "expressions" / "blink.yaml"), package=root)
+    return counts, sag(root, STILL, env=fresh_env(root / "none", shipped=False))
+
+
+@pytest.mark.heavy(110)
+def test_with_no_compiled_kernels_a_render_compiles_only_the_kernels_it_runs(compiled_copy):
     """An empty cache and no shipped kernels (another machine, another Python): the
     render compiles the kernels it runs and no other: the physics' serial twins, never
     their parallel kernels; nothing of the photo look or of a face from a photo; the
-    same kernels the shipped ones hand a new user."""
-    counts = render_counts(tmp_path, shipped=False, spec="expressions/blink.yaml")
+    same kernels the shipped ones hand a new user. (The package compiled is the copy
+    with gravity: its term compiled with the solver that calls it.)"""
+    counts, _ = compiled_copy
     compiled = {name for name, (hits, misses, _) in counts.items() if misses}
     assert not {name for name, (hits, misses, _) in counts.items() if hits}
     physics = {name for name in compiled if name.startswith("facesim.physics")}
-    assert "facesim.physics.solver._simulate__serial" in physics
+    assert "facesim.physics.solver._simulate__serial" in physics and "facesim.physics.gravity._gravity_forces" in physics
     assert not {name for name in physics if counts[name][2]}  # no parallel variant
     assert "facesim.physics.solver._simulate" not in counts or counts["facesim.physics.solver._simulate"][1] == 0
     assert not {name for name in compiled if name.startswith("facesim.face.bake")}
@@ -112,3 +201,44 @@ def test_with_no_compiled_kernels_a_render_compiles_only_the_kernels_it_runs(tmp
     # with it (Numba's statistics count it), and none is compiled ahead (no signatures)
     never_called = {name for name, (hits, misses, _) in counts.items() if not hits and not misses}
     assert "facesim.physics.repulsion._edge_repulsion_forces" in never_called  # the parallel kernel, untouched
+
+
+def test_a_force_term_is_one_kernel_and_one_line(compiled_copy):
+    """Gravity added to a copy of the package as one kernel and one line (its module,
+    named among the solver's terms): the face sags under its weight, where the package
+    without it holds the same spec at rest."""
+    _, with_gravity = compiled_copy
+    without = sag(PROJECT_DIR, STILL)
+    assert abs(without) < 1e-9  # nothing moves a face at rest
+    # a weight of 100 against the tissue springs alone (k = 300 per vertex) would sag 0.33
+    # cm; the skin's springs and pinned rim hold it to less, but it sags
+    assert -0.34 < with_gravity < -0.02
+    assert np.isfinite(with_gravity)
+
+
+CALLEE = "from numba import njit\n\n\n@njit(cache=True)\ndef weight():\n    return {}\n"
+CALLER = "from numba import njit\n\nfrom .callee import weight\n\n\n@njit(cache=True)\ndef total():\n    return 2.0 * weight()\n"
+
+
+def test_a_changed_kernel_is_compiled_again_in_the_kernels_that_call_it(tmp_path):
+    """A compiled kernel carries the kernels it calls inside it (the solver carries every
+    force term): when only a callee's file changes, the caller, its own file untouched,
+    is compiled again from the same cache instead of loaded stale. Numba alone keys a
+    kernel by its own file and loaded the stale caller (facesim.config._key_numba_cache;
+    the solver kept a changed term's old code until it was keyed by all of facesim's)."""
+    copy = package_copy(tmp_path)
+    toy = copy / "physics" / "toy"
+    toy.mkdir()
+    (toy / "__init__.py").write_text("")
+    (toy / "caller.py").write_text(CALLER)
+    env = dict(os.environ, PYTHONPATH=str(tmp_path), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    command = [sys.executable, "-c", "import facesim.config; from facesim.physics.toy.caller import total; print(total())"]
+
+    totals = []
+    for weight in ("1.0", "5.0"):
+        (toy / "callee.py").write_text(CALLEE.format(weight))
+        result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+        assert result.returncode == 0, result.stderr[-2000:]
+        totals.append(float(result.stdout.split()[-1]))
+    assert totals == [2.0, 10.0]
+    assert any((tmp_path / "cache").rglob("caller.total-*.nbi"))  # the caller was cached, in the cache given
