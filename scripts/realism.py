@@ -218,7 +218,7 @@ class Table:
                                 crop(renderer.render_figure(moved)), drawn, theirs))
         self.other_rows, self.other_passed = [], {name: 0 for name, _ in OTHER_FACES}
         for row, _, ours, _, theirs in self.panels:
-            if ours is None or row.startswith("PupilDilate"):  # the same rig on every face, nothing on its skin
+            if ours is None or theirs is None or row.startswith("PupilDilate"):  # rigs on every face, nothing on the skin
                 continue
             cells = []
             for name, face in OTHER_FACES:
