@@ -44,7 +44,7 @@ def test_indices_valid_and_on_the_side_the_name_says(mesh, muscles):
         else:
             assert max(abs(s) for s in sides) < 1e-6, name
     assert muscles.controls == ("jaw", "jaw_thrust", "jaw_sideways_l", "jaw_sideways_r", "lip_seal", "cheek_puff_l", "cheek_puff_r",
-                                "mouth_left", "mouth_right", "lip_roll_upper", "lip_roll_lower",
+                                "mouth_left", "mouth_right", "lip_roll_upper", "lip_roll_lower", "tongue_out", "tongue_up",
                                 "eyelid_r", "levator_palpebrae_r", "gaze_up_r", "gaze_down_r", "gaze_left_r", "gaze_right_r",
                                 "pupil_dilate_r", "eyelid_l", "levator_palpebrae_l", "gaze_up_l", "gaze_down_l", "gaze_left_l",
                                 "gaze_right_l", "pupil_dilate_l")

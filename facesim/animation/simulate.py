@@ -21,9 +21,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InputError, SimulationError
+from ..errors import SimulationError
 from ..face.figure import figure_for
-from ..face.head import HeadMesh, identity_notice
+from ..face.head import identity_notice
 from ..face.loading import load_face_model
 from ..geometry import rotation
 from ..physics.model import Model
@@ -222,15 +222,6 @@ def look_table(model: Model, table: np.ndarray) -> np.ndarray | None:
     return look if look.any() else None
 
 
-def check_tongue(model: Model, table: np.ndarray, source: str) -> None:
-    """InputError when the tongue's controls act on a face with no tongue to draw (a
-    mask: the Hopper face, a mesh from a photo): they would move nothing."""
-    acting = [c for c in TONGUE if c in model.muscles.names and table[:, model.muscles.index(c)].any()]
-    if acting and not isinstance(model.mesh, HeadMesh):
-        raise InputError(f"{source}: {', '.join(acting)} (AU19, tongueOut) move the tongue of ICT's head, and this face "
-                         "is a mask with none: render it on the default head")
-
-
 def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background: bool = False,
              with_muscle_forces: bool = False, stream: bool = False) -> Animation:
     """Simulate an expression spec from the neutral face. ``notice`` receives a one-line
@@ -255,7 +246,6 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
     with phase("model"):
         model = model_for(spec)
     table = activation_table(spec, model.muscles)
-    check_tongue(model, table, spec.source)
     unusual = identity_notice(spec.identity)  # weights the spec gives (a face directory's are its fit's)
     if notice and unusual:
         notice(f"{spec.source}: {unusual}")

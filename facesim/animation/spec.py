@@ -37,7 +37,7 @@ from ..config import DEFAULT_MESH, DEFAULT_MUSCLES, LIBRARY, MUSCLE_PRESETS
 from ..errors import InputError
 from ..face.head import IDENTITY_MODES, identity_problem
 from ..face.material import MaterialSpec
-from ..physics.muscles import MuscleSet
+from ..physics.muscles import TONGUE, MuscleSet
 from ..schema import Strict, load_model
 from .arkit import is_shape_name, shape_facs
 from .timeline import (
@@ -382,7 +382,8 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
     def muscle_vector(name: str, where: str) -> np.ndarray:
         name = MPEG4_FAPS.get(name, name)
         if name not in names:
-            fail(where, "unknown muscle (see `facesim muscles`)")
+            fail(where, f"{name} moves a head's tongue, and this face has none (a mask: render it on the default head)"
+                 if name in TONGUE else "unknown muscle (see `facesim muscles`)")
         v = np.zeros(len(names))
         v[names.index(name)] = 1.0
         return v

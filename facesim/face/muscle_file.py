@@ -38,6 +38,7 @@ from ..physics.muscles import (
     MuscleSet,
 )
 from ..schema import Strict, load_model
+from .head import HeadMesh
 
 #: A landmark: a vertex index (an integer: YAML's ``true`` is not vertex 1) or a 3D point.
 Point = Annotated[StrictInt, Field(ge=0)] | tuple[float, float, float]
@@ -306,7 +307,7 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         _upper_over_lower(mesh, upper, lower, where)
         jaw = JawRig(hinge, lower, upper, float(np.radians(spec.jaw.max_angle)), float(np.radians(spec.jaw.contact_tilt)),
                      spec.jaw.protrusion, spec.jaw.excursion, spec.jaw.puff_pressure)
-        controls += JAW_CONTROLS + TONGUE  # the tongue rides the mandible
+        controls += JAW_CONTROLS + (TONGUE if isinstance(mesh, HeadMesh) else ())  # a head's tongue rides the mandible
     eyelids = []
     for lid in spec.eyelids:
         where = f"{source}: eyelid {lid.name}"
