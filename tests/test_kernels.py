@@ -301,7 +301,6 @@ def test_step_matches_reference(switches, bones, rng):
         activation[model.muscle_count:] = rng.uniform(0.3, 1, len(activation) - model.muscle_count)
     ref_x, ref_v = naive.step(model, x, v, activation, 0.0025)
     state = layout.State(x.copy(), v.copy())
-    n = model.vertex_count
     solver._quasi_implicit_step(model.arrays, state, rig_control.control(model.arrays, activation), 0.0025, np.empty_like(x),
                                 layout.workspace(model.arrays), layout.forces(model.arrays))
     assert_close(state.v, ref_v)

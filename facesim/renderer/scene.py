@@ -182,7 +182,7 @@ class FaceRenderer:
                 self._flags |= pyrender.RenderFlags.RGBA
             self._renderer.render(self._scene, flags=self._flags)  # uploads the buffers once
 
-    def _lines(self, scene, points: np.ndarray, colour) -> "pyrender.Primitive":
+    def _lines(self, scene, points: np.ndarray, colour):
         """Line segments (point pairs) in one unlit colour, moved with the head."""
         pyrender = self._pyrender
         lines = pyrender.Primitive(positions=points, mode=pyrender.constants.GLTF.LINES,
