@@ -273,3 +273,28 @@ def test_a_one_sided_smile_lifts_one_lip_corner_as_the_smile_does_and_leaves_the
     assert np.abs((right - rest)[mirror] * np.array([-1.0, 1.0, 1.0]) - (left - rest)).max() < 1e-3
     with pytest.raises(InputError, match="AU23_L: AU23 .lip tightener. moves both sides at once"):
         activation_table(spec("happy").model_copy(update=dict(aus={"AU23_L": 1.0})), model.muscles)
+
+
+def test_a_lid_whose_first_point_lies_off_the_eye_opening_still_finds_its_corners():
+    """On a mesh finer than its muscle file (the Hopper face Loop-subdivided four times,
+    110k vertices) a lid's listed point can snap to a vertex beside the opening: the
+    lid's edges and the canthi are found from the opening's vertex nearest it (the model
+    failed to build, an IndexError)."""
+    from dataclasses import replace
+
+    from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
+    from facesim.face.loading import load_mesh
+    from facesim.face.muscle_file import load_muscles
+    from facesim.physics.rig import _lid_arcs, _opening
+
+    mesh = load_mesh(HOPPER_MESH)
+    lid = load_muscles(HOPPER_MUSCLES, mesh).eyelids[0]
+    opening = _opening(mesh, lid.upper)
+    upper, lower, corners = _lid_arcs(mesh, opening, lid)
+    assert len(corners) == 2
+    beside = [v for v in mesh.faces[np.isin(mesh.faces, lid.upper[0]).any(axis=1)].ravel() if v not in opening]
+    assert beside  # a vertex of a triangle at the lid's first point, off the opening
+    off = replace(lid, upper=np.r_[beside[0], lid.upper[1:]])
+    moved_upper, moved_lower, moved_corners = _lid_arcs(mesh, opening, off)
+    assert np.array_equal(np.sort(moved_corners), np.sort(corners))
+    assert np.array_equal(moved_lower, lower) and np.array_equal(moved_upper, upper)

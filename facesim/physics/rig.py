@@ -424,7 +424,9 @@ def _lid_arcs(mesh: FaceMesh, opening: np.ndarray | None, lid) -> tuple[np.ndarr
         at.append(int(stretch[np.argmax(across[stretch])]))
     if len(at) != 2:
         return lid.upper, lid.lower, opening[at]
-    first = int(np.flatnonzero(opening == lid.upper[0])[0])
+    # the loop's vertex at the lid's first point (nearest it: on a mesh so fine that the
+    # points snap off the opening, the Hopper face Loop-subdivided four times, it was none)
+    first = int(np.argmin(np.linalg.norm(mesh.vertices[opening] - mesh.vertices[lid.upper[0]], axis=1)))
     # the corner nearer the lid's first point along the loop is the outer one
     at.sort(key=lambda c: min((c - first) % len(opening), (first - c) % len(opening)))
     one, other = _arcs(opening, *at)
