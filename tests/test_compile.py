@@ -178,7 +178,7 @@ def compiled_copy(tmp_path_factory):
     solver = (copy / "physics" / "solver.py").read_text()
     assert solver.count(ANCHOR) == 1 and solver.count(TERMS) == 1
     (copy / "physics" / "solver.py").write_text(solver.replace(ANCHOR, ANCHOR + LINE).replace(TERMS, TERMS + "    gravity,\n"))
-    counts = render_counts(root, False, str(PROJECT_DIR / "expressions" / "blink.yaml"), package=root)
+    counts = render_counts(root, False, "expressions/blink.yaml", package=root)
     return counts, sag(root, STILL, env=fresh_env(root / "none", shipped=False))
 
 

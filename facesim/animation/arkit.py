@@ -14,7 +14,7 @@ The map follows ICT FaceKit's FACS table (its README): ``mouthShrugUpper`` is it
 ``mouthUpperUp`` its AU11, ``cheekSquint`` its AU6. ICT's ``cheekRaiser_L`` is a second
 scan of the same unit and maps to AU6_L too; ICT splits ARKit's ``browInnerUp`` into its
 two sides (``browInnerUp_L``: AU1_L). ARKit's ``tongueOut``, which ICT lacks, drives the
-tongue's rig (facesim.face.figure.Tongue).
+tongue's rig (facesim.face.tongue.Tongue).
 """
 
 from __future__ import annotations

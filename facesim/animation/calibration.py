@@ -190,16 +190,11 @@ TONGUE_PAST = 1.0
 
 
 def teeth_pieces(head) -> list[np.ndarray]:
-    """Each of the head's teeth as its vertices (ICT's M_Teeth: a connected piece a tooth)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    """Each of the head's teeth as its vertices (ICT's M_Teeth: a connected piece a tooth,
+    as the figure makes each one rigid)."""
+    from ..face.figure import _components
 
-    edges = head.triangles_of("M_Teeth")[:, [0, 1, 1, 2]].reshape(-1, 2)
-    n = len(head.vertices)
-    _, label = connected_components(coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
-                                    directed=False)
-    rows = head.part("teeth")
-    return [rows[label[rows] == k] for k in np.unique(label[rows])]
+    return _components(head.triangles_of("M_Teeth"), head.part("teeth"))
 
 
 def lower_incisors(figure, head) -> np.ndarray:

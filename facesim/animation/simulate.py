@@ -208,7 +208,7 @@ def look_table(model: Model, table: np.ndarray) -> np.ndarray | None:
     eye's turn in degrees from the gaze controls (yaw toward the subject's left, pitch
     up; the subject's left eye, then the right), their activations times ``GAZE_ANGLE``,
     each pupil's dilation (0-1, left, right), and the tongue's protrusion and tip raise
-    (0-1: facesim.face.figure.Tongue), on top of the pose's gaze; None when none acts."""
+    (0-1: facesim.face.tongue.Tongue), on top of the pose's gaze; None when none acts."""
     columns = model.rig.gaze_column
     look = np.zeros((len(table), 8))
     for eye in range(2):

@@ -101,7 +101,7 @@ ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     "AU18": ("lip pucker", {"incisivus_labii": 1.0}),
     # FACS scores the tongue shown with the lips parted and the jaw dropped (AU25, AU26):
     # the unit opens the jaw as AU26 does, enough for the tongue to pass between the
-    # incisors (facesim.face.figure.Tongue: it stays behind them while they are closer)
+    # incisors (facesim.face.tongue.Tongue: it stays behind them while they are closer)
     "AU19": ("tongue show", {"tongue_out": 1.0, "jaw": 0.5}),
     "AU20": ("lip stretcher", {"risorius": 1.0}),
     # the funnel's lips drawn apart by the lower lip depressor and the upper lip raiser,

@@ -84,7 +84,7 @@ GAZE = ("gaze_up", "gaze_down", "gaze_left", "gaze_right")
 #: either side 50 degrees), but gazes beyond 30 degrees come with the head.
 GAZE_ANGLE = (25.0, 30.0, 30.0, 30.0)
 #: The tongue's controls, each 0-1, carried by the mandible and drawn by the renderer
-#: (facesim.face.figure.Tongue): ``tongue_out`` protrudes it (the genioglossus: FACS's
+#: (facesim.face.tongue.Tongue): ``tongue_out`` protrudes it (the genioglossus: FACS's
 #: AU19, ARKit's tongueOut), ``tongue_up`` raises its tip toward the alveolar ridge (the
 #: superior longitudinal muscle: the /l/ and /t/ of speech).
 TONGUE = ("tongue_out", "tongue_up")
