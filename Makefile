@@ -4,16 +4,30 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 APT_PACKAGES := libosmesa6 libegl1 libegl-mesa0 libgl1-mesa-dri
+# the export tests' outside tools: headless Chromium (three.js plays the GLB) and Node.js
+# (the Khronos glTF-Validator, three.js: tests/js, from the npm registry)
+TEST_APT_PACKAGES := chromium
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: setup system-packages demo test bench kernels realism mesh docs clean
+.PHONY: setup system-packages test-packages apt demo test bench kernels realism mesh docs clean
 
 system-packages:
-	@missing=""; for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	@$(MAKE) --no-print-directory apt PACKAGES="$(APT_PACKAGES)"
+
+# Node.js with npm: Debian's nodejs and npm, unless a Node.js with its own npm is there already
+test-packages: system-packages
+	@$(MAKE) --no-print-directory apt PACKAGES="$(TEST_APT_PACKAGES) $$(command -v npm >/dev/null || echo nodejs npm)"
+
+apt:
+	@missing=""; for p in $(PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
 	if [ -n "$$missing" ]; then \
 		echo "installing Debian packages:$$missing"; \
 		$(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $$missing; \
 	fi
+
+tests/js/node_modules/.installed: tests/js/package.json tests/js/package-lock.json | test-packages
+	cd tests/js && npm ci --silent --no-audit --no-fund
+	@touch $@
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -43,7 +57,7 @@ demo: setup
 # and Python's bytecode cached, as a user's machine does (a sandbox that sets
 # PYTHONDONTWRITEBYTECODE compiled facesim's source again in each of the suite's hundreds of
 # processes: a warm render's imports 0.84 s against 0.67 s)
-test: system-packages $(VENV)/.photo
+test: test-packages $(VENV)/.photo tests/js/node_modules/.installed
 	OPENBLAS_NUM_THREADS=1 PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest -n 2 --dist loadscope --no-loadscope-reorder --durations=15
 
 bench: setup
@@ -78,4 +92,4 @@ docs: system-packages $(VENV)/.photo
 	$(BIN)/python scripts/own_face_docs.py
 
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out .pytest_cache tests/js/node_modules

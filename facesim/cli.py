@@ -107,8 +107,10 @@ def identity_seed(identity: Optional[int]) -> Optional[int]:
 @handled
 def render(
     spec: Optional[Path] = typer.Argument(None, help="expression spec (YAML); optional with --blend"),
-    output: Optional[str] = typer.Option(None, "-o", "--output", help="out.mp4, out.gif, out.npz, out.png (one frame) "
-                                         "or a directory of PNGs (DIR/, or an existing directory; default out/<name>.mp4)"),
+    output: Optional[str] = typer.Option(None, "-o", "--output", help="out.mp4, out.gif, out.npz, out.png (one frame), "
+                                         "a directory of PNGs (DIR/, or an existing directory; default out/<name>.mp4), "
+                                         "out.glb (the rig and its clip: docs/export.md) or out.csv (ARKit curves, "
+                                         "Live Link Face's layout)"),
     frame: Optional[int] = typer.Option(None, "--frame", help="with -o x.png: the frame to write (default: the apex)"),
     size: Optional[str] = typer.Option(None, "--size", help="frame size WxH (default 512x512; with --onto, the photo's)"),
     fps: Optional[float] = typer.Option(None, "--fps", help="playback rate (default: the spec's, 25)"),
@@ -136,7 +138,7 @@ def render(
     from . import timings as phases
     from .animation.simulate import simulate
     from .animation.spec import blend_spec, load_spec
-    from .export.output import check_output, drawn_in_order, progress_bar, write_animation
+    from .export.output import EXPORTS, check_output, drawn_in_order, progress_bar, write_animation
     from .physics.run import compiled_here
 
     if timings:
@@ -176,6 +178,16 @@ def render(
     if frame is not None and (kind != "image" or not 0 <= frame < loaded.frames):
         raise InputError(f"--frame: with -o x.png, a frame from 0 to {loaded.frames - 1}, got {frame}" if kind == "image"
                          else f"--frame: only with a .png output (one frame), not {output}")
+    if kind in EXPORTS:  # the rig and its curves: nothing drawn
+        from .export.rig import write_clip
+
+        if frame is not None or show_muscles or onto is not None:
+            given = "--frame" if frame is not None else "--show-muscles" if show_muscles else "--onto"
+            raise InputError(f"{given}: draws frames; {output} carries the face's rig and weights, which are not drawn")
+        animation = simulate(loaded, notice=notice)
+        exported = write_clip(animation, loaded, output, kind, replace=force)
+        typer.echo(f"wrote {output}: {exported.summary()}", err=True)
+        return
     # drawn and encoded as its frames come, from a few frames of positions where each is read once, in order
     animation = simulate(loaded, notice=notice, background=True, with_muscle_forces=show_muscles,
                          stream=drawn_in_order(kind, settings, loaded.frames, jobs))
@@ -346,6 +358,30 @@ def muscles_command(
     if plot:
         plot_muscles(model, regions, plot)
         typer.echo(f"wrote {plot}", err=True)
+
+
+@app.command()
+@handled
+def rig(
+    output: Path = typer.Option(..., "-o", "--output", help="the rig, a glTF binary: head.glb"),
+    identity: Optional[int] = IDENTITY,
+    face: Optional[Path] = FACE,
+    force: bool = FORCE,
+):
+    """Write the head as a glTF rig for Blender, three.js, Unity and Unreal: ARKit's 52
+    morph targets, each baked by facesim's physics, and a skeleton (neck, head, jaw, eyes);
+    docs/export.md."""
+    from .animation.spec import Spec
+    from .export.output import output_kind
+    from .export.rig import write_rig
+    from .files import check_destination
+
+    if output_kind(output) != "glb":
+        raise InputError(f"{output}: a rig is written as a glTF binary: name it NAME.glb")
+    check_destination(output, force)
+    spec = Spec(name="head").with_overrides(identity=identity_seed(identity), face=face)
+    exported = write_rig(spec, output, replace=force)
+    typer.echo(f"wrote {output}: {exported.summary()}", err=True)
 
 
 @app.command()

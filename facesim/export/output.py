@@ -31,7 +31,9 @@ from ..timings import phase
 from ..workers import worker_pool
 
 FULL_DISK = 1 << 20  # bytes free under which a short output is put down to a full disk
-KINDS = {".mp4": "mp4", ".gif": "gif", ".npz": "npz"}
+KINDS = {".mp4": "mp4", ".gif": "gif", ".npz": "npz", ".glb": "glb", ".csv": "csv"}
+#: The kinds that carry the face to other tools as a rig and its curves (facesim.export.rig).
+EXPORTS = ("glb", "csv")
 #: Arrow length per unit of muscle force in --show-muscles (cm per force unit).
 ARROW_SCALE = 0.004
 
@@ -51,8 +53,8 @@ def check_output(path: str | Path, force: bool, settings: RenderSettings | None 
     kind = output_kind(path)
     path = Path(path)
     if kind == "unknown":
-        raise InputError(f"{path}: unknown output type {path.suffix!r} (use .mp4, .gif, .npz, .png, or a directory "
-                         "written DIR/)")
+        raise InputError(f"{path}: unknown output type {path.suffix!r} (use .mp4, .gif, .npz, .png, a directory "
+                         "written DIR/, .glb or .csv)")
     if kind == "mp4" and settings is not None and (settings.width % 2 or settings.height % 2):
         raise InputError(f"--size: MP4 needs an even width and height, got {settings.width}x{settings.height}")
     check_destination(path, force, directory=kind == "png")
@@ -325,6 +327,8 @@ def write_animation(animation: Animation, path: str | Path, settings: RenderSett
     (``replace``: it was allowed to exist, with --force). A ``.png`` is one frame:
     ``frame``, by default the apex."""
     kind = output_kind(path)
+    if kind in EXPORTS:
+        raise ValueError(f"{path}: a rig and its curves are written by facesim.export.rig.write_clip, from the spec")
     path = Path(path)
     start = time.perf_counter()
     if kind == "npz":

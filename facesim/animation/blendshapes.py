@@ -1,0 +1,156 @@
+"""ARKit's 52 blendshapes baked by facesim's physics, and animations fitted back onto them.
+
+A rig that plays in any engine is a rest mesh and a set of shapes (morph targets) the
+engine adds up with weights. facesim's shapes are not sculpted: each of ARKit's 52
+(facesim.animation.arkit.ARKIT_52) is its control (muscles, the jaw's and lips' rig, the
+lids, the tongue) held at full weight until the skin settles (``calibration.FRAMES``
+frames eased in over ``calibration.ONSET``, as REALISM.md measures them), and the shape
+is every vertex of the head at the last frame, in ICT FaceKit's order, as the figure
+draws it (facesim.face.figure): skin, lids, lashes, teeth and tongue. ARKit's
+``mouthClose`` is, as ICT scans it, the lips closed over the open jaw, and ``tongueOut``
+the tongue out between parted teeth: each is baked on top of ``jawOpen`` and stored as
+the difference (``BAKED_ON_TOP``), as an engine adds it to jawOpen.
+
+The eyeballs' turn is left out of the shapes: a rotation is not a vertex offset (a
+linear blend of a turned sphere shrinks it), so gaze travels as the eyes' joints (as
+ARKit's own face geometry leaves the eyes to their transforms); the lids and skin that
+follow the gaze stay in ``eyeLook*``.
+
+``fit_weights`` goes the other way: each frame of a simulated animation, as the head
+shows it without its head pose and eye turns, as the weights in [0, 1] whose shapes add
+up closest to it, by bounded least squares over every vertex a shape moves (BVLS,
+scipy.optimize.lsq_linear, on the shapes' 52x52 triangular factor, so a frame costs the
+same however many vertices move). Its residual, the playback's error, is reported over
+ICT's face area: nonlinear physics (two muscles pulling one fold) does not add up
+exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .arkit import ARKIT_52
+from .calibration import FACE_AREA, FRAMES, ONSET
+
+#: Shapes baked on top of another: ICT's mouthClose is the lips closed over the open jaw
+#: (calibration.ON_TOP: its AU27 is jawOpen), and the tongue comes out between parted
+#: incisors only (facesim.face.tongue: with the jaw closed it stays behind the teeth).
+BAKED_ON_TOP = {"mouthClose": "jawOpen", "tongueOut": "jawOpen"}
+#: A vertex is part of a shape when that shape moves it this far (cm): 1 µm.
+MOVED = 1e-4
+
+
+@dataclass(frozen=True)
+class Shapes:
+    """The head's rest (N, 3), cm, ICT's vertex order, and each of ``names``' displacement
+    from it at full weight, ``deltas`` (S, N, 3) float32 cm."""
+
+    names: tuple[str, ...]
+    rest: np.ndarray
+    deltas: np.ndarray
+
+    def moved(self, k: int) -> np.ndarray:
+        """The vertices shape k moves at least MOVED."""
+        return np.flatnonzero(np.linalg.norm(self.deltas[k], axis=1) >= MOVED)
+
+    def played(self, weights: np.ndarray) -> np.ndarray:
+        """(N, 3) the rest plus the weighted shapes: what an engine plays for ``weights`` (S,)."""
+        return self.rest + np.tensordot(np.asarray(weights, dtype=np.float64), self.deltas, axes=1)
+
+
+def unturned(animation, frame: int) -> np.ndarray:
+    """(N, 3) the head at ``frame`` as the shapes carry it: the figure for the simulated
+    skin, the jaw, the pupils and the tongue, without the head's pose and the eyeballs'
+    turn (which travel as joints)."""
+    pose = animation.pose_at(frame)
+    look = None
+    if pose is not None and len(pose) > 5:
+        look = np.array(pose[5:], dtype=np.float64)
+        look[0:4] = 0.0
+    return animation.figure.positions(animation.positions_at(frame), animation.jaw_at(frame), (0.0, 0.0), look)
+
+
+def _held(spec, weights: dict[str, float]) -> np.ndarray:
+    from .simulate import simulate
+
+    held = spec.model_copy(update=dict(
+        name="+".join(weights), frames=FRAMES, onset=ONSET, arkit=weights, aus={}, activations={}, expressions={},
+        timeline=[], pose=[], include=[], sequence=[]))
+    held._source = spec._source
+    animation = simulate(held)
+    return unturned(animation, animation.frames - 1)
+
+
+def _baked(spec) -> dict[str, np.ndarray]:
+    from ..face.figure import figure_for
+    from .simulate import model_for
+
+    rest = figure_for(model_for(spec)).rest
+    deltas = []
+    for name in ARKIT_52:
+        base = {BAKED_ON_TOP[name]: 1.0} if name in BAKED_ON_TOP else None
+        shape = _held(spec, {**(base or {}), name: 1.0}) - (rest if base is None else _held(spec, base))
+        deltas.append(shape.astype(np.float32))
+    return {"rest": rest, "deltas": np.stack(deltas)}
+
+
+def _source_digest() -> bytes:
+    """facesim's own source, every module: the shapes follow from all of its physics."""
+    package = Path(__file__).resolve().parents[1]
+    return b"".join(p.read_bytes() for p in sorted(package.rglob("*.py")))
+
+
+def bake(spec) -> Shapes:
+    """ARKit's 52 shapes on the head of ``spec`` (facesim.animation.spec.Spec: its mesh,
+    muscles, material, identity or face directory; its motion is ignored), kept in
+    facesim's cache (facesim.cache) by everything they follow from."""
+    from .. import cache
+    from ..face.figure import figure_for
+    from .simulate import model_for
+
+    model = model_for(spec)
+    if figure_for(model) is None:
+        raise InputError(f"{spec.source}: mesh: {spec.mesh_path.name} is a face mask; ARKit's shapes are baked on a head "
+                         "(ICT's, --identity or --face)")
+    parts = [_source_digest(), model.rest_position.tobytes(), model.faces.tobytes(), spec.muscles_path.read_bytes(),
+             spec.material.model_dump_json().encode()]
+    stored = cache.cached_arrays("arkit-shapes", cache.key(*parts), lambda: _baked(spec), keep=4)
+    return Shapes(ARKIT_52, stored["rest"].astype(np.float64), stored["deltas"])
+
+
+@dataclass(frozen=True)
+class Fit:
+    """Weights (frames, S) in [0, 1], and the playback's error per frame over ICT's face
+    area (cm): the root mean square and the largest of the vertices' distances."""
+
+    weights: np.ndarray
+    rms: np.ndarray
+    largest: np.ndarray
+
+
+def fit_weights(shapes: Shapes, frames) -> Fit:
+    """The weights of ``shapes`` closest to each of ``frames`` ((N, 3) heads, as ``unturned``
+    gives them), bounded to [0, 1] (module docstring)."""
+    from scipy.linalg import cho_factor, solve_triangular
+    from scipy.optimize import lsq_linear
+
+    rows = np.unique(np.concatenate([shapes.moved(k) for k in range(len(shapes.names))]))
+    a = shapes.deltas[:, rows].reshape(len(shapes.names), -1).astype(np.float64).T  # (3k, S)
+    normal = a.T @ a
+    normal[np.diag_indices_from(normal)] += 1e-9 * np.trace(normal) / len(normal)  # a shape that moves nothing
+    factor = cho_factor(normal, lower=False)[0]
+    upper = np.triu(factor)
+    face = np.arange(min(FACE_AREA, len(shapes.rest)))
+    weights, rms, largest = [], [], []
+    for x in frames:
+        b = (np.asarray(x, dtype=np.float64)[rows] - shapes.rest[rows]).ravel()
+        w = lsq_linear(upper, solve_triangular(upper, a.T @ b, trans="T"), bounds=(0.0, 1.0), method="bvls").x
+        error = np.linalg.norm(shapes.played(w)[face] - x[face], axis=1)
+        weights.append(w)
+        rms.append(np.sqrt(np.mean(error ** 2)))
+        largest.append(error.max())
+    return Fit(np.array(weights).reshape(-1, len(shapes.names)), np.array(rms), np.array(largest))

@@ -1,0 +1,261 @@
+"""The face for other tools (issue 47): ``facesim rig -o head.glb`` and ``facesim render
+x.yaml -o x.glb`` (glTF 2.0: ARKit's 52 shapes baked by the physics, a skeleton, the clip)
+checked by the Khronos glTF-Validator and played by three.js in headless Chromium, and
+``-o x.csv`` (ARKit's curves in Live Link Face's layout). The GLB's arrays are read here
+from its bytes with NumPy alone (``Glb``), not through facesim's writer."""
+
+import functools
+import http.server
+import json
+import shutil
+import subprocess
+import threading
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+from conftest import EXPRESSIONS
+from test_cli import facesim, one_line_error
+
+from facesim.animation.arkit import ARKIT_52
+from facesim.animation.blendshapes import bake, unturned
+from facesim.animation.calibration import FACE_AREA
+from facesim.animation.simulate import model_for, simulate
+from facesim.animation.spec import load_spec
+from facesim.export.gltf import JOINTS, METRES
+from facesim.export.rig import LIVE_LINK_COLUMNS
+from facesim.face.figure import figure_for
+
+JS = Path(__file__).parent / "js"
+HAPPY = EXPRESSIONS / "happy.yaml"
+_COMPONENTS = {5121: np.uint8, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+_WIDTH = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+
+
+class Glb:
+    """A GLB's JSON and binary chunk, and its accessors as arrays (sparse ones filled in)."""
+
+    def __init__(self, path: Path):
+        data = path.read_bytes()
+        assert data[:4] == b"glTF" and int.from_bytes(data[8:12], "little") == len(data)
+        length = int.from_bytes(data[12:16], "little")
+        self.json = json.loads(data[20:20 + length])
+        self.blob = data[28 + length:]
+        self.size = len(data)
+
+    def _view(self, index: int, offset: int, dtype, count: int) -> np.ndarray:
+        view = self.json["bufferViews"][index]
+        start = view.get("byteOffset", 0) + offset
+        return np.frombuffer(self.blob, dtype=dtype, count=count, offset=start)
+
+    def accessor(self, index: int) -> np.ndarray:
+        a = self.json["accessors"][index]
+        width = _WIDTH[a["type"]]
+        dtype = _COMPONENTS[a["componentType"]]
+        if "bufferView" in a:
+            out = self._view(a["bufferView"], a.get("byteOffset", 0), dtype, a["count"] * width).copy()
+        else:
+            out = np.zeros(a["count"] * width, dtype=dtype)
+        out = out.reshape(a["count"], width)
+        if "sparse" in a:
+            s = a["sparse"]
+            rows = self._view(s["indices"]["bufferView"], 0, _COMPONENTS[s["indices"]["componentType"]], s["count"])
+            out[rows.astype(np.int64)] = self._view(s["values"]["bufferView"], 0, dtype, s["count"] * width).reshape(-1, width)
+        return out
+
+    @property
+    def mesh(self) -> dict:
+        return self.json["meshes"][0]
+
+    def target(self, name: str, attribute: str = "POSITION") -> np.ndarray:
+        k = self.mesh["extras"]["targetNames"].index(name)
+        return self.accessor(self.mesh["primitives"][0]["targets"][k][attribute]).astype(np.float64)
+
+    def played(self, weights: np.ndarray) -> np.ndarray:
+        """(N, 3) cm: the rest plus the weighted targets, as an engine plays them."""
+        x = self.accessor(self.mesh["primitives"][0]["attributes"]["POSITION"]).astype(np.float64)
+        for name, w in zip(self.mesh["extras"]["targetNames"], weights):
+            if w:
+                x += w * self.target(name)
+        return x / METRES
+
+    def clip_weights(self) -> np.ndarray:
+        """(frames, targets) the clip's morph weights."""
+        animation = self.json["animations"][0]
+        channel = next(c for c in animation["channels"] if c["target"]["path"] == "weights")
+        output = self.accessor(animation["samplers"][channel["sampler"]]["output"])
+        return output.reshape(-1, len(self.mesh["extras"]["targetNames"]))
+
+
+def validator_report(path: Path) -> dict:
+    result = subprocess.run(["node", str(JS / "validate.mjs"), str(path)], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    return json.loads(result.stdout)
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    """The default head's rig, happy's clip and happy's curves, written by the command line."""
+    out = tmp_path_factory.mktemp("export")
+    rig = facesim("rig", "-o", out / "head.glb", check=0)
+    clip = facesim("render", HAPPY, "-o", out / "happy.glb", check=0)
+    curves = facesim("render", HAPPY, "-o", out / "happy.csv", check=0)
+    return out, rig.stderr, clip.stderr, curves.stderr
+
+
+@pytest.fixture(scope="module")
+def happy():
+    spec = load_spec(HAPPY)
+    return spec, simulate(spec), bake(spec)
+
+
+@pytest.mark.heavy(40)
+def test_the_rig_and_the_clip_pass_the_khronos_validator(exported):
+    out, *_ = exported
+    for name, animations in (("head.glb", 0), ("happy.glb", 1)):
+        report = validator_report(out / name)
+        issues = report["issues"]
+        assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"][:5]
+        info = report["info"]
+        assert info["hasMorphTargets"] and info["hasSkins"] and info["animationCount"] == animations
+
+
+def test_the_rig_is_icts_head_in_its_vertex_order_with_arkits_52_named_shapes(exported, happy):
+    out, rig_line, *_ = exported
+    spec, animation, shapes = happy
+    rig = Glb(out / "head.glb")
+    assert rig.mesh["extras"]["targetNames"] == list(ARKIT_52)
+    primitives = rig.mesh["primitives"]
+    assert all(len(p["targets"]) == 52 for p in primitives)
+    rest = rig.accessor(primitives[0]["attributes"]["POSITION"])
+    figure = figure_for(model_for(spec))
+    assert rest.shape == (26719, 3)
+    np.testing.assert_array_equal(rest, (figure.rest * METRES).astype(np.float32))  # ICT's order, in metres
+    materials = [rig.json["materials"][p["material"]]["name"] for p in primitives]
+    assert materials == [p.name for p in figure.parts]
+    for p, part in zip(primitives, figure.parts):  # each part's triangles, as ICT's OBJ has them
+        np.testing.assert_array_equal(rig.accessor(p["indices"]).reshape(-1, 3), part.triangles)
+    assert [n["name"] for n in rig.json["nodes"][:len(JOINTS)]] == list(JOINTS)
+    assert rig.size <= 15 * 2**20  # issue 47's bound
+    assert "52 ARKit shapes" in rig_line
+
+
+def test_a_target_is_the_physics_shape_and_moves_the_face_as_its_name_says(exported, happy):
+    """mouthSmileLeft's offsets are facesim's baked shape (to the sparse storage's 0.01 mm)
+    and lift the subject's left mouth corner up and outward, the right one barely; jawOpen
+    drops the chin and the lower incisors with it; eyeBlinkLeft closes the left lids."""
+    out, *_ = exported
+    spec, animation, shapes = happy
+    rig = Glb(out / "head.glb")
+    head = animation.model.mesh.head
+    for name in ("mouthSmileLeft", "jawOpen", "eyeBlinkLeft"):
+        ours = shapes.deltas[ARKIT_52.index(name)].astype(np.float64)
+        theirs = rig.target(name) / METRES
+        assert np.abs(theirs - ours).max() < 1.1e-3
+    smile = rig.target("mouthSmileLeft") / METRES
+    left, right = (head.landmarks[c] for c in (291, 61))  # MediaPipe's mouth corners: 291 on the subject's left
+    assert smile[left, 1] > 0.3 and smile[left, 0] > 0.2 and np.linalg.norm(smile[right]) < 0.3 * np.linalg.norm(smile[left])
+    jaw = rig.target("jawOpen") / METRES
+    assert jaw[head.landmarks[152], 1] < -1.0  # the chin drops more than a centimetre
+    assert (jaw[figure_for(animation.model).jaw_rows, 1] < 0).mean() > 0.5
+
+
+def test_the_clip_plays_back_the_fitted_weights(exported, happy):
+    """The clip's weights are in [0, 1], smile at happy's apex and rest at its first frame;
+    played back from the file they come within the ``wrote`` line's figures of facesim's
+    own frames over the face area, and the clip adds at most 100 KB to the rig."""
+    out, rig_line, clip_line, _ = exported
+    spec, animation, shapes = happy
+    clip = Glb(out / "happy.glb")
+    weights = clip.clip_weights()
+    assert weights.shape == (animation.frames, 52) and weights.min() >= 0 and weights.max() <= 1
+    smile = [ARKIT_52.index("mouthSmileLeft"), ARKIT_52.index("mouthSmileRight")]
+    assert weights[animation.apex_frame, smile].min() > 0.5 and weights[0].max() < 0.05
+    stated_rms = float(clip_line.split("within ")[1].split(" mm RMS")[0])
+    stated_max = float(clip_line.split("mm RMS, ")[1].split(" mm at most")[0])
+    errors = []
+    for k in (0, animation.apex_frame, animation.frames - 1):
+        error = np.linalg.norm(clip.played(weights[k])[:FACE_AREA] - unturned(animation, k)[:FACE_AREA], axis=1) * 10
+        errors.append((np.sqrt(np.mean(error ** 2)), error.max()))
+    assert max(e[0] for e in errors) <= stated_rms + 0.01 and max(e[1] for e in errors) <= stated_max + 0.01
+    assert clip.size - Glb(out / "head.glb").size <= 100 * 1024
+
+
+def test_live_link_csv_carries_the_same_curves(exported):
+    out, *_ = exported
+    lines = (out / "happy.csv").read_text().splitlines()
+    rows = [line.split(",") for line in lines]
+    assert tuple(rows[0]) == LIVE_LINK_COLUMNS and LIVE_LINK_COLUMNS[2] == "EyeBlinkLeft"
+    assert len(rows) == 36 and {r[1] for r in rows[1:]} == {"61"}
+    assert [r[0] for r in rows[1:4]] == ["00:00:00:00.000", "00:00:00:01.000", "00:00:00:02.000"]  # 25 fps
+    assert rows[26][0] == "00:00:01:00.000"
+    values = np.array([[float(v) for v in r[2:54]] for r in rows[1:]])
+    np.testing.assert_allclose(values, Glb(out / "happy.glb").clip_weights(), atol=1e-6)
+
+
+class _Quiet(http.server.SimpleHTTPRequestHandler):
+    def log_message(self, *args):
+        pass
+
+
+def three_js_screenshot(directory: Path, glb: str, seconds: float, out: Path) -> np.ndarray:
+    """``glb`` (in ``directory``) played by three.js (tests/js/play.html) to ``seconds`` in
+    headless Chromium (Debian's), screenshot at 512x512."""
+    chromium = shutil.which("chromium")
+    assert chromium, "Debian's chromium is not installed: `make test` installs it"
+    for name in ("play.html", "node_modules"):
+        if not (directory / name).exists():
+            (directory / name).symlink_to(JS / name)
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(_Quiet, directory=str(directory)))
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        url = f"http://127.0.0.1:{server.server_address[1]}/play.html?glb={glb}&t={seconds}"
+        subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                        "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                        f"--user-data-dir={directory / 'chromium-profile'}", "--enable-unsafe-swiftshader",
+                        "--use-angle=swiftshader", "--window-size=512,512", "--virtual-time-budget=30000",
+                        f"--screenshot={out}", url], capture_output=True, timeout=300, check=True)
+    finally:
+        server.shutdown()
+    return iio.imread(out)[:, :, :3]
+
+
+@pytest.mark.heavy(40)
+def test_three_js_plays_the_clip_as_facesim_draws_it(exported, happy, tmp_path):
+    """happy.glb played in three.js to its apex: MediaPipe finds the face, and its mouth
+    corners move from the first frame the way they do in facesim's own frames (cosine at
+    least 0.9, each corner's motion in units of the eyes' distance)."""
+    from facesim.face.photo import detect_landmarks
+
+    out, *_ = exported
+    spec, animation, _ = happy
+    apex = animation.apex_frame
+
+    def corners(image, source):
+        landmarks = detect_landmarks(image, source)[:, :2]
+        return landmarks[[61, 291]] / np.linalg.norm(landmarks[263] - landmarks[33])
+
+    three = {k: corners(three_js_screenshot(out, "happy.glb", k / animation.fps, tmp_path / f"three{k}.png"),
+                        f"three.js frame {k}") for k in (0, apex)}
+    ours = {}
+    for k in (0, apex):
+        facesim("render", HAPPY, "-o", tmp_path / f"ours{k}.png", "--frame", k, check=0)
+        ours[k] = corners(iio.imread(tmp_path / f"ours{k}.png")[:, :, :3], f"facesim frame {k}")
+    a, b = (three[apex] - three[0]).ravel(), (ours[apex] - ours[0]).ravel()
+    assert a @ b / (np.linalg.norm(a) * np.linalg.norm(b)) >= 0.9
+    assert np.linalg.norm(a) > 0.05  # the corners move in three.js: a smile, not a still face
+
+
+def test_bad_exports_are_one_line_errors_and_nothing_is_written(tmp_path):
+    one_line_error(facesim("rig", "-o", tmp_path / "head.obj"), 2, "head.obj", ".glb")
+    assert not (tmp_path / "head.obj").exists()
+    mask = facesim("render", HAPPY, "--mesh", EXPRESSIONS.parent / "meshes" / "face.obj", "-o", tmp_path / "mask.glb")
+    one_line_error(mask, 2, "face mask", "head")
+    one_line_error(facesim("render", HAPPY, "-o", tmp_path / "a.glb", "--frame", "3"), 2, "--frame")
+    mine = tmp_path / "mine.glb"
+    mine.write_bytes(b"my own file")
+    one_line_error(facesim("rig", "-o", mine), 2, "already exists")
+    one_line_error(facesim("rig", "-o", mine, "--force"), 2)  # not a GLB facesim wrote: never replaced
+    assert mine.read_bytes() == b"my own file"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.glb"]
