@@ -161,25 +161,32 @@ def test_a_target_is_the_physics_shape_and_moves_the_face_as_its_name_says(expor
     assert (jaw[figure_for(animation.model).jaw_rows, 1] < 0).mean() > 0.5
 
 
-def test_the_clip_plays_back_the_fitted_weights(exported, happy):
+def test_the_clip_plays_facesims_frames_back_within_issue_47s_bounds(exported, happy):
     """The clip's weights are in [0, 1], smile at happy's apex and rest at its first frame;
-    played back from the file they come within the ``wrote`` line's figures of facesim's
-    own frames over the face area, and the clip adds at most 100 KB to the rig."""
+    played back from the file (ARKit's 52 and the clip's correctives) every frame comes
+    within 0.5 mm RMS and 2 mm at most of facesim's own over the face area, as the
+    ``wrote`` line says; the clip's curves add at most 100 KB to the rig."""
     out, rig_line, clip_line, _ = exported
     spec, animation, shapes = happy
     clip = Glb(out / "happy.glb")
+    names = clip.mesh["extras"]["targetNames"]
+    assert names[:52] == list(ARKIT_52) and all(n.startswith("corrective_") for n in names[52:])
     weights = clip.clip_weights()
-    assert weights.shape == (animation.frames, 52) and weights.min() >= 0 and weights.max() <= 1
+    assert weights.shape == (animation.frames, len(names)) and weights.min() >= 0 and weights.max() <= 1
     smile = [ARKIT_52.index("mouthSmileLeft"), ARKIT_52.index("mouthSmileRight")]
     assert weights[animation.apex_frame, smile].min() > 0.5 and weights[0].max() < 0.05
     stated_rms = float(clip_line.split("within ")[1].split(" mm RMS")[0])
     stated_max = float(clip_line.split("mm RMS, ")[1].split(" mm at most")[0])
-    errors = []
-    for k in (0, animation.apex_frame, animation.frames - 1):
+    rms, largest = [], []
+    for k in range(animation.frames):
         error = np.linalg.norm(clip.played(weights[k])[:FACE_AREA] - unturned(animation, k)[:FACE_AREA], axis=1) * 10
-        errors.append((np.sqrt(np.mean(error ** 2)), error.max()))
-    assert max(e[0] for e in errors) <= stated_rms + 0.01 and max(e[1] for e in errors) <= stated_max + 0.01
-    assert clip.size - Glb(out / "head.glb").size <= 100 * 1024
+        rms.append(np.sqrt(np.mean(error ** 2)))
+        largest.append(error.max())
+    assert max(rms) <= min(stated_rms + 0.01, 0.5) and max(largest) <= min(stated_max + 0.01, 2.0)
+    channels = clip.json["animations"][0]["samplers"]
+    curves = {a for s in channels for a in (s["input"], s["output"])}
+    views = {clip.json["accessors"][a]["bufferView"] for a in curves}
+    assert sum(clip.json["bufferViews"][v]["byteLength"] for v in views) <= 100 * 1024
 
 
 def test_live_link_csv_carries_the_same_curves(exported):
@@ -191,7 +198,7 @@ def test_live_link_csv_carries_the_same_curves(exported):
     assert [r[0] for r in rows[1:4]] == ["00:00:00:00.000", "00:00:00:01.000", "00:00:00:02.000"]  # 25 fps
     assert rows[26][0] == "00:00:01:00.000"
     values = np.array([[float(v) for v in r[2:54]] for r in rows[1:]])
-    np.testing.assert_allclose(values, Glb(out / "happy.glb").clip_weights(), atol=1e-6)
+    np.testing.assert_allclose(values, Glb(out / "happy.glb").clip_weights()[:, :52], atol=1e-6)  # the same fit
 
 
 class _Quiet(http.server.SimpleHTTPRequestHandler):

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..animation.blendshapes import CORRECTIVE
+
 #: ICT's centimetres to glTF's metres.
 METRES = 0.01
 #: A target holds the vertices its shape moves at least this far (cm), as sparse
@@ -185,10 +187,12 @@ def rig_glb(shapes, figure, clip: Clip | None = None, name: str = "facesim head"
     for k in range(len(shapes.names)):
         delta = shapes.deltas[k].astype(np.float64)
         moved = np.flatnonzero(np.linalg.norm(delta, axis=1) >= MOVED)
-        turn = vertex_normals(rest + delta, drawn)
-        turn[unused] = normals[unused]
-        turn -= normals
-        turned = np.flatnonzero(np.linalg.norm(turn, axis=1) > TURNED)
+        turn, turned = np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+        if not shapes.names[k].startswith(CORRECTIVE):  # a clip's correctives are fractions of a millimetre: no turn
+            turn = vertex_normals(rest + delta, drawn)
+            turn[unused] = normals[unused]
+            turn -= normals
+            turned = np.flatnonzero(np.linalg.norm(turn, axis=1) > TURNED)
         targets.append(g.Attributes(POSITION=out.sparse(n, moved, delta[moved] * METRES, bounds=True),
                                   NORMAL=out.sparse(n, turned, turn[turned], bounds=False)))
     primitives = []

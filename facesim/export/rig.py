@@ -12,6 +12,7 @@ columns counted) and only then renamed into place.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..animation.arkit import ARKIT_52
-from ..animation.blendshapes import Fit, Shapes, bake, fit_weights, unturned
+from ..animation.blendshapes import Fit, Shapes, bake, fit_weights, unturned, with_correctives
 from ..files import WriteError, atomic_path
 from .gltf import Clip, rig_glb
 
@@ -37,12 +38,14 @@ class Exported:
     frames: int
     size: int
     fit: Fit | None
+    correctives: int = 0
 
     def summary(self) -> str:
         size = f"{self.size / 2**20:.1f} MB" if self.size >= 2**20 else f"{self.size / 1024:.0f} KB"
         if self.fit is None:
             return f"{len(ARKIT_52)} ARKit shapes baked by the physics, {size}"
-        return (f"{self.frames} frames, {size}; the weights play facesim's frames back within "
+        extra = f" and {self.correctives} correctives" if self.correctives else ""
+        return (f"{self.frames} frames, {size}; ARKit's 52 weights{extra} play facesim's frames back within "
                 f"{self.fit.rms.max() * 10:.2f} mm RMS, {self.fit.largest.max() * 10:.2f} mm at most, over the face")
 
 
@@ -132,10 +135,12 @@ def write_clip(animation, spec, path: str | Path, kind: str, replace: bool = Fal
     """An animation as ``kind``: ``glb`` (the rig and its clip) or ``csv`` (Live Link Face's curves)."""
     shapes = bake(spec)
     clip, fit = clip_of(animation, shapes)
-    if kind == "glb":
+    if kind == "glb":  # the clip's own correctives on top (blendshapes.with_correctives): played as facesim drew it
+        shapes, fit = with_correctives(shapes, lambda k: unturned(animation, k), animation.frames, fit)
+        clip = dataclasses.replace(clip, weights=fit.weights)
         data = rig_glb(shapes, animation.figure, clip, name=f"facesim {spec.title}")
         _write_bytes(data, Path(path), replace, _verify_glb(len(shapes.names), animation.frames))
     else:
         data = live_link_csv(clip).encode()
         _write_bytes(data, Path(path), replace, _verify_csv(animation.frames))
-    return Exported(animation.frames, len(data), fit)
+    return Exported(animation.frames, len(data), fit, len(shapes.names) - len(ARKIT_52))
