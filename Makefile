@@ -4,9 +4,10 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 APT_PACKAGES := libosmesa6 libegl1 libegl-mesa0 libgl1-mesa-dri
-# the export tests' outside tools: headless Chromium (three.js plays the GLB) and Node.js
-# (the Khronos glTF-Validator, three.js: tests/js, from the npm registry)
-TEST_APT_PACKAGES := chromium
+# the export tests' outside tools: headless Chromium (three.js plays the GLB), Blender
+# with Debian's NumPy (it imports the GLB and plays the point cache) and Node.js (the
+# Khronos glTF-Validator, three.js: tests/js, from the npm registry)
+TEST_APT_PACKAGES := chromium blender python3-numpy
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 .PHONY: setup system-packages test-packages apt demo test bench kernels realism mesh docs clean

@@ -36,7 +36,7 @@ from pathlib import Path
 from .errors import FacesimError, InputError
 
 #: The files facesim writes, by suffix, with the bytes each kind starts with (at offset).
-MAGIC = {".mp4": (4, b"ftyp"), ".glb": (0, b"glTF"), ".gif": (0, b"GIF8"), ".npz": (0, b"PK"), ".png": (0, b"\x89PNG"),
+MAGIC = {".mp4": (4, b"ftyp"), ".glb": (0, b"glTF"), ".pc2": (0, b"POINTCACHE2"), ".gif": (0, b"GIF8"), ".npz": (0, b"PK"), ".png": (0, b"\x89PNG"),
          ".obj": None, ".yaml": None, ".json": None, ".csv": None, ".parquet": (0, b"PAR1")}
 #: What facesim writes into every directory it makes (a frames directory, a face
 #: directory): each file's SHA-256. ``--force`` replaces a directory only while it holds

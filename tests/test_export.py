@@ -101,6 +101,8 @@ def exported(tmp_path_factory):
     rig = facesim("rig", "-o", out / "head.glb", check=0)
     clip = facesim("render", HAPPY, "-o", out / "happy.glb", check=0)
     curves = facesim("render", HAPPY, "-o", out / "happy.csv", check=0)
+    facesim("render", HAPPY, "-o", out / "happy.pc2", check=0)
+    facesim("render", HAPPY, "-o", out / "happy.npz", check=0)
     return out, rig.stderr, clip.stderr, curves.stderr
 
 
@@ -266,3 +268,69 @@ def test_bad_exports_are_one_line_errors_and_nothing_is_written(tmp_path):
     one_line_error(facesim("rig", "-o", mine, "--force"), 2)  # not a GLB facesim wrote: never replaced
     assert mine.read_bytes() == b"my own file"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.glb"]
+
+
+def test_the_point_cache_is_every_vertex_of_facesims_frames_with_its_rest_mesh(exported, tmp_path):
+    """-o happy.pc2: PC2's header and, frame by frame, the head's vertices as the NPZ holds
+    them (in metres); happy.obj beside it is the rest mesh in the same order; a user's
+    happy.obj beside the cache is never taken."""
+    out, *_ = exported
+    data = (out / "happy.pc2").read_bytes()
+    assert data[:12] == b"POINTCACHE2\0"
+    version, points, start, rate, samples = np.frombuffer(data[12:32], dtype="<i4", count=5)
+    assert (version, points, samples) == (1, 26719, 35)
+    cache = np.frombuffer(data[32:], dtype="<f4").reshape(samples, points, 3)
+    with np.load(out / "happy.npz") as npz:
+        np.testing.assert_allclose(cache, npz["positions"] * METRES, atol=2e-8)  # float32 of the same metres
+        rest, faces = npz["rest"], npz["faces"]
+    lines = (out / "happy.obj").read_text().splitlines()
+    vertices = np.array([[float(v) for v in line.split()[1:]] for line in lines if line.startswith("v ")])
+    triangles = np.array([[int(v) - 1 for v in line.split()[1:]] for line in lines if line.startswith("f ")])
+    np.testing.assert_allclose(vertices, rest * METRES, atol=1e-8)
+    assert len(triangles) == len(faces) and set(map(tuple, triangles)) == set(map(tuple, faces))  # all of ICT's
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "happy.obj").write_text("my own mesh\n")
+    one_line_error(facesim("render", HAPPY, "-o", mine / "happy.pc2"), 2, "happy.obj", "already exists")
+    assert sorted(p.name for p in mine.iterdir()) == ["happy.obj"]
+
+
+def _gltf_axes(x: np.ndarray) -> np.ndarray:
+    """Blender's z-up coordinates back into glTF's y-up (its importer turns +y into +z)."""
+    return np.stack([x[..., 0], x[..., 2], -x[..., 1]], axis=-1)
+
+
+@pytest.mark.heavy(20)
+def test_blender_plays_the_glb_and_the_point_cache_as_facesim_does(exported, happy, tmp_path):
+    """Debian's Blender 3.4, headless (tests/blender/read_exports.py): the GLB's shape keys
+    are ARKit's 52 by name (and the clip's correctives), its action spans the clip's 35
+    frames, and at the apex Blender's evaluated face equals facesim's own playback of the
+    weights within 0.1 mm; the OBJ with the PC2 in a Mesh Cache modifier equals facesim's
+    NPZ within 0.01 mm at every frame."""
+    out, *_ = exported
+    spec, animation, _ = happy
+    result = tmp_path / "blender.npz"
+    subprocess.run(["blender", "-b", "--factory-startup", "--python", str(Path(__file__).parent / "blender" / "read_exports.py"),
+                    "--", str(out / "happy.glb"), str(out / "happy.pc2"), str(result), "25"],
+                   capture_output=True, timeout=600, check=True)
+    blender = np.load(result)
+    names = [str(n) for n in blender["names"]]
+    assert names[1:53] == list(ARKIT_52) and names[0] == "Basis" and all(n.startswith("corrective_") for n in names[53:])
+    assert (blender["key_start"], blender["key_end"]) == (0, animation.frames - 1)
+    clip = Glb(out / "happy.glb")
+    rest = clip.accessor(clip.mesh["primitives"][0]["attributes"]["POSITION"]).astype(np.float64)
+    theirs_rest = _gltf_axes(blender["glb_rest"])
+    order = {tuple(p): k for k, p in enumerate(rest)}
+    shared = {tuple(p) for p, n in zip(*np.unique(rest, axis=0, return_counts=True)) if n > 1}
+    found = [(b, order[tuple(p)]) for b, p in enumerate(theirs_rest) if tuple(p) in order and tuple(p) not in shared]
+    assert len(found) > 0.95 * len(theirs_rest)  # Blender's vertices are ICT's, each found by its rest position
+    b, k = np.array(found).T
+    apex = animation.apex_frame
+    ours = clip.played(clip.clip_weights()[apex]) * METRES
+    error = np.linalg.norm(_gltf_axes(blender["glb_frames"][apex])[b] - ours[k], axis=1)
+    assert error.max() < 1e-4  # metres: 0.1 mm
+    assert blender["obj_count"] == 26719
+    with np.load(out / "happy.npz") as npz:
+        positions = npz["positions"] * METRES
+    for f in range(animation.frames):
+        assert np.abs(blender["pc2_frames"][f] - positions[f]).max() < 1e-5, f

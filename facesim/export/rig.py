@@ -42,6 +42,8 @@ class Exported:
 
     def summary(self) -> str:
         size = f"{self.size / 2**20:.1f} MB" if self.size >= 2**20 else f"{self.size / 1024:.0f} KB"
+        if self.fit is None and self.frames:
+            return f"{self.frames} frames of every vertex of the head, and its rest mesh beside it, {size}"
         if self.fit is None:
             return f"{len(ARKIT_52)} ARKit shapes baked by the physics, {size}"
         extra = f" and {self.correctives} correctives" if self.correctives else ""
@@ -132,7 +134,12 @@ def _verify_csv(frames: int):
 
 
 def write_clip(animation, spec, path: str | Path, kind: str, replace: bool = False) -> Exported:
-    """An animation as ``kind``: ``glb`` (the rig and its clip) or ``csv`` (Live Link Face's curves)."""
+    """An animation as ``kind``: ``glb`` (the rig and its clip), ``csv`` (Live Link Face's
+    curves) or ``pc2`` (the point cache and its rest mesh: facesim.export.pointcache)."""
+    if kind == "pc2":
+        from .pointcache import write_point_cache
+
+        return Exported(animation.frames, write_point_cache(animation, path, replace), None)
     shapes = bake(spec)
     clip, fit = clip_of(animation, shapes)
     if kind == "glb":  # the clip's own correctives on top (blendshapes.with_correctives): played as facesim drew it
