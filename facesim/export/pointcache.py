@@ -19,8 +19,6 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
-import numpy as np
-
 from ..files import WriteError, atomic_path, check_destination
 from .gltf import METRES
 
