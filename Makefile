@@ -77,7 +77,7 @@ mesh: system-packages $(VENV)/.photo
 
 THESIS_SPECS := $(addprefix expressions/,$(addsuffix .yaml,happy sad angry fear disgust surprise disgusted_anger happy_surprise))
 
-docs: system-packages $(VENV)/.photo
+docs: test-packages $(VENV)/.photo tests/js/node_modules/.installed
 	$(BIN)/facesim sheet $(THESIS_SPECS) $(addprefix expressions/,duchenne_smile.yaml blink.yaml look_left.yaml) \
 		-o docs/expressions.png --columns 4 --force
 	$(BIN)/facesim muscles --plot docs/muscles.png > /dev/null
@@ -91,6 +91,8 @@ docs: system-packages $(VENV)/.photo
 	$(BIN)/facesim dataset --n 12 --seed 3 --jitter --size 192x192 -o out/dataset-docs --sheet docs/dataset.png
 	# your own face: docs/own_face.png and docs/animated_photo.gif (face from-photo, --look photo, --onto)
 	$(BIN)/python scripts/own_face_docs.py
+	# the face in other tools: three.js and Blender (docs/export.md)
+	$(BIN)/python scripts/export_docs.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache tests/js/node_modules

@@ -4,12 +4,10 @@ checked by the Khronos glTF-Validator and played by three.js in headless Chromiu
 ``-o x.csv`` (ARKit's curves in Live Link Face's layout). The GLB's arrays are read here
 from its bytes with NumPy alone (``Glb``), not through facesim's writer."""
 
-import functools
-import http.server
 import json
 import shutil
 import subprocess
-import threading
+import sys
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -203,30 +201,14 @@ def test_live_link_csv_carries_the_same_curves(exported):
     np.testing.assert_allclose(values, Glb(out / "happy.glb").clip_weights()[:, :52], atol=1e-6)  # the same fit
 
 
-class _Quiet(http.server.SimpleHTTPRequestHandler):
-    def log_message(self, *args):
-        pass
-
-
 def three_js_screenshot(directory: Path, glb: str, seconds: float, out: Path) -> np.ndarray:
     """``glb`` (in ``directory``) played by three.js (tests/js/play.html) to ``seconds`` in
-    headless Chromium (Debian's), screenshot at 512x512."""
-    chromium = shutil.which("chromium")
-    assert chromium, "Debian's chromium is not installed: `make test` installs it"
-    for name in ("play.html", "node_modules"):
-        if not (directory / name).exists():
-            (directory / name).symlink_to(JS / name)
-    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(_Quiet, directory=str(directory)))
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    try:
-        url = f"http://127.0.0.1:{server.server_address[1]}/play.html?glb={glb}&t={seconds}"
-        subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                        "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                        f"--user-data-dir={directory / 'chromium-profile'}", "--enable-unsafe-swiftshader",
-                        "--use-angle=swiftshader", "--window-size=512,512", "--virtual-time-budget=30000",
-                        f"--screenshot={out}", url], capture_output=True, timeout=300, check=True)
-    finally:
-        server.shutdown()
+    headless Chromium (Debian's), screenshot at 512x512 (scripts/export_docs.three_js)."""
+    assert shutil.which("chromium"), "Debian's chromium is not installed: `make test` installs it"
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
+    from export_docs import three_js
+
+    three_js(directory, glb, seconds, out)
     return iio.imread(out)[:, :, :3]
 
 
