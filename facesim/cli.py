@@ -109,8 +109,8 @@ def render(
     spec: Optional[Path] = typer.Argument(None, help="expression spec (YAML); optional with --blend"),
     output: Optional[str] = typer.Option(None, "-o", "--output", help="out.mp4, out.gif, out.npz, out.png (one frame), "
                                          "a directory of PNGs (DIR/, or an existing directory; default out/<name>.mp4), "
-                                         "out.glb (the rig and its clip: docs/export.md) or out.csv (ARKit curves, "
-                                         "Live Link Face's layout)"),
+                                         "out.glb (the rig and its clip: docs/export.md), out.csv (ARKit curves, "
+                                         "Live Link Face's layout) or out.pc2 (a point cache, out.obj beside it)"),
     frame: Optional[int] = typer.Option(None, "--frame", help="with -o x.png: the frame to write (default: the apex)"),
     size: Optional[str] = typer.Option(None, "--size", help="frame size WxH (default 512x512; with --onto, the photo's)"),
     fps: Optional[float] = typer.Option(None, "--fps", help="playback rate (default: the spec's, 25)"),
@@ -178,12 +178,14 @@ def render(
     if frame is not None and (kind != "image" or not 0 <= frame < loaded.frames):
         raise InputError(f"--frame: with -o x.png, a frame from 0 to {loaded.frames - 1}, got {frame}" if kind == "image"
                          else f"--frame: only with a .png output (one frame), not {output}")
-    if kind in EXPORTS:  # the rig and its curves: nothing drawn
+    if kind in EXPORTS:  # the rig, its curves, a point cache: nothing drawn (--frame was refused above)
+        from .animation.blendshapes import check_head
         from .export.rig import write_clip
 
-        if frame is not None or show_muscles or onto is not None:
-            given = "--frame" if frame is not None else "--show-muscles" if show_muscles else "--onto"
-            raise InputError(f"{given}: draws frames; {output} carries the face's rig and weights, which are not drawn")
+        if show_muscles or onto is not None:
+            given = "--show-muscles" if show_muscles else "--onto"
+            raise InputError(f"{given}: draws frames; {output} carries the face to other tools, undrawn")
+        check_head(loaded)
         animation = simulate(loaded, notice=notice)
         exported = write_clip(animation, loaded, output, kind, replace=force)
         typer.echo(f"wrote {output}: {exported.summary()}", err=True)

@@ -243,6 +243,8 @@ def test_bad_exports_are_one_line_errors_and_nothing_is_written(tmp_path):
     assert not (tmp_path / "head.obj").exists()
     mask = facesim("render", HAPPY, "--mesh", EXPRESSIONS.parent / "meshes" / "face.obj", "-o", tmp_path / "mask.glb")
     one_line_error(mask, 2, "face mask", "head")
+    mask = facesim("render", HAPPY, "--mesh", EXPRESSIONS.parent / "meshes" / "face.obj", "-o", tmp_path / "mask.pc2")
+    one_line_error(mask, 2, "face mask", "head")
     one_line_error(facesim("render", HAPPY, "-o", tmp_path / "a.glb", "--frame", "3"), 2, "--frame")
     mine = tmp_path / "mine.glb"
     mine.write_bytes(b"my own file")

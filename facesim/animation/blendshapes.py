@@ -104,18 +104,26 @@ def _source_digest() -> bytes:
     return b"".join(p.read_bytes() for p in sorted(package.rglob("*.py")))
 
 
+def check_head(spec) -> None:
+    """InputError unless ``spec``'s face is a head: a rig, its curves and a point cache are
+    a head's (a face mask has no figure to bake or cache)."""
+    from ..face.figure import figure_for
+    from .simulate import model_for
+
+    if figure_for(model_for(spec)) is None:
+        raise InputError(f"{spec.source}: mesh: {spec.mesh_path.name} is a face mask; the rig, its curves and point "
+                         "caches are a head's (ICT's, --identity or --face)")
+
+
 def bake(spec) -> Shapes:
     """ARKit's 52 shapes on the head of ``spec`` (facesim.animation.spec.Spec: its mesh,
     muscles, material, identity or face directory; its motion is ignored), kept in
     facesim's cache (facesim.cache) by everything they follow from."""
     from .. import cache
-    from ..face.figure import figure_for
     from .simulate import model_for
 
+    check_head(spec)
     model = model_for(spec)
-    if figure_for(model) is None:
-        raise InputError(f"{spec.source}: mesh: {spec.mesh_path.name} is a face mask; ARKit's shapes are baked on a head "
-                         "(ICT's, --identity or --face)")
     parts = [_source_digest(), model.rest_position.tobytes(), model.faces.tobytes(), spec.muscles_path.read_bytes(),
              spec.material.model_dump_json().encode()]
     stored = cache.cached_arrays("arkit-shapes", cache.key(*parts), lambda: _baked(spec), keep=4)
@@ -132,6 +140,16 @@ class Fit:
     largest: np.ndarray
 
 
+def _fit(shapes: Shapes, weights, frames) -> Fit:
+    """A Fit of ``weights`` (frames, S) to ``frames``: each frame's playback error over the
+    face area, played on the face area's rows alone."""
+    face = slice(0, min(FACE_AREA, len(shapes.rest)))
+    errors = [np.linalg.norm(shapes.rest[face] + np.tensordot(w, shapes.deltas[:, face], axes=1) - x[face], axis=1)
+              for w, x in zip(weights, frames)]
+    return Fit(np.asarray(weights, dtype=np.float64).reshape(-1, len(shapes.names)),
+               np.array([np.sqrt(np.mean(e ** 2)) for e in errors]), np.array([e.max() for e in errors]))
+
+
 def fit_weights(shapes: Shapes, frames) -> Fit:
     """The weights of ``shapes`` closest to each of ``frames`` ((N, 3) heads, as ``unturned``
     gives them), bounded to [0, 1] (module docstring)."""
@@ -144,16 +162,10 @@ def fit_weights(shapes: Shapes, frames) -> Fit:
     normal[np.diag_indices_from(normal)] += 1e-9 * np.trace(normal) / len(normal)  # a shape that moves nothing
     factor = cho_factor(normal, lower=False)[0]
     upper = np.triu(factor)
-    face = np.arange(min(FACE_AREA, len(shapes.rest)))
-    weights, rms, largest = [], [], []
-    for x in frames:
-        b = (np.asarray(x, dtype=np.float64)[rows] - shapes.rest[rows]).ravel()
-        w = lsq_linear(upper, solve_triangular(upper, a.T @ b, trans="T"), bounds=(0.0, 1.0), method="bvls").x
-        error = np.linalg.norm(shapes.played(w)[face] - x[face], axis=1)
-        weights.append(w)
-        rms.append(np.sqrt(np.mean(error ** 2)))
-        largest.append(error.max())
-    return Fit(np.array(weights).reshape(-1, len(shapes.names)), np.array(rms), np.array(largest))
+    frames = [np.asarray(x, dtype=np.float64) for x in frames]
+    weights = [lsq_linear(upper, solve_triangular(upper, a.T @ (x[rows] - shapes.rest[rows]).ravel(), trans="T"),
+                          bounds=(0.0, 1.0), method="bvls").x for x in frames]
+    return _fit(shapes, weights, frames)
 
 
 #: A clip's playback is made faithful (``with_correctives``) until its error over the face
@@ -217,10 +229,4 @@ def with_correctives(shapes: Shapes, frame_at, frames: int, fit: Fit) -> tuple[S
                 weights.append(part)
     names = tuple(f"{CORRECTIVE}{k + 1}" for k in range(len(deltas)))
     extended = Shapes(shapes.names + names, shapes.rest, np.concatenate([shapes.deltas, np.stack(deltas)]))
-    all_weights = np.column_stack([fit.weights, np.column_stack(weights)])
-    rms, largest = [], []
-    for k in range(frames):
-        error = np.linalg.norm(extended.played(all_weights[k])[face] - frame_at(k)[face], axis=1)
-        rms.append(np.sqrt(np.mean(error ** 2)))
-        largest.append(error.max())
-    return extended, Fit(all_weights, np.array(rms), np.array(largest))
+    return extended, _fit(extended, np.column_stack([fit.weights, np.column_stack(weights)]), map(frame_at, range(frames)))
