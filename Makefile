@@ -3,7 +3,8 @@
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-APT_PACKAGES := libosmesa6 libegl1 libegl-mesa0 libgl1-mesa-dri
+# eSpeak NG's library and voices: `facesim say` and a spec's speech: track (facesim.speech)
+APT_PACKAGES := libosmesa6 libegl1 libegl-mesa0 libgl1-mesa-dri libespeak-ng1
 # the export tests' outside tools: headless Chromium (three.js plays the GLB), Blender
 # with Debian's NumPy (it imports the GLB and plays the point cache) and Node.js (the
 # Khronos glTF-Validator, three.js: tests/js, from the npm registry)

@@ -136,10 +136,7 @@ def render(
 ):
     """Simulate one expression spec (or a blend of expressions) and render it."""
     from . import timings as phases
-    from .animation.simulate import simulate
     from .animation.spec import blend_spec, load_spec
-    from .export.output import EXPORTS, check_output, drawn_in_order, progress_bar, write_animation
-    from .physics.run import compiled_here
 
     if timings:
         phases.start()
@@ -154,6 +151,19 @@ def render(
     if spec and blend:
         loaded = loaded.with_overrides(include=loaded.include + blend_spec(blend).include)
     loaded = loaded.with_overrides(mesh=mesh, muscles=muscles, identity=identity_seed(identity), face=face)
+    _render(loaded, output, frame, size, fps, camera, framing, backend, wireframe, show_muscles, antialias, supersample,
+            force, jobs, look, onto, timings)
+
+
+def _render(loaded, output, frame, size, fps, camera, framing, backend, wireframe, show_muscles, antialias, supersample,
+            force, jobs, look, onto, timings):
+    """`facesim render` and `facesim say` once the spec is loaded: the output checked,
+    the spec simulated and written."""
+    from . import timings as phases
+    from .animation.simulate import simulate
+    from .export.output import EXPORTS, check_output, drawn_in_order, progress_bar, write_animation
+    from .physics.run import compiled_here
+
     if onto is not None and size is not None:
         raise InputError(f"--size: not with --onto, whose frames take the photo's size; got --size {size}")
     settings = settings_from(size or "512x512", camera, wireframe, show_muscles, antialias, framing, look, onto,
@@ -204,6 +214,55 @@ def render(
     if timings:
         phases.add("simulation", report.simulation_seconds)
         typer.echo(phases.summary(phases.process_age()), err=True)
+
+
+@app.command()
+@handled
+def say(
+    text: str = typer.Argument(..., help="the words to say"),
+    output: Optional[str] = typer.Option(None, "-o", "--output", help="out.mp4 (with the sound), out.gif, out.npz, "
+                                         "a directory of PNGs, out.glb, out.csv or out.pc2, as `render` takes"),
+    voice: str = typer.Option("en", "--voice", help="eSpeak NG's voice or language (en, en-us, de, fr, ...)"),
+    rate: int = typer.Option(175, "--rate", help="words a minute (80-450)"),
+    blend: Optional[str] = typer.Option(None, "--blend", help="expressions held under the words, e.g. happy=0.8"),
+    size: Optional[str] = typer.Option(None, "--size", help="frame size WxH (default 512x512; with --onto, the photo's)"),
+    fps: float = typer.Option(25.0, "--fps", help="frames a second (the clip plays in real time)"),
+    camera: str = CAMERA,
+    framing: str = FRAMING,
+    backend: str = BACKEND,
+    antialias: bool = ANTIALIAS,
+    supersample: bool = SUPERSAMPLE_OPTION,
+    force: bool = FORCE,
+    mesh: Optional[Path] = MESH,
+    muscles: Optional[Path] = MUSCLES,
+    identity: Optional[int] = IDENTITY,
+    face: Optional[Path] = FACE,
+    look: str = LOOK,
+    onto: Optional[Path] = typer.Option(None, "--onto", help="render through the face's fitted camera into this photo"),
+    timings: bool = typer.Option(False, "--timings", help="say where the time went"),
+):
+    """Say TEXT: eSpeak NG speaks it, its phonemes become visemes, the face's muscles and
+    jaw say them, and the MP4 carries the sound (docs/speech.md)."""
+    from pydantic import ValidationError
+
+    from . import timings as phases
+    from .animation.spec import Spec, blend_spec
+    from .schema import describe
+
+    if timings:
+        phases.start()
+    if not 0 < fps <= 240:
+        raise InputError(f"--fps: must be between 0 and 240, got {fps}")
+    include = [] if blend is None else [i.model_dump() for i in blend_spec(blend).include]
+    words = "_".join("".join(c for c in w if c.isalnum()) for w in text.split()[:4]).strip("_").lower() or "speech"
+    try:
+        loaded = Spec.model_validate(dict(name=f"say_{words}", fps=fps, onset=0, include=include,
+                                          speech=dict(text=text, voice=voice, rate=rate)))
+    except ValidationError as exc:
+        raise InputError(f"say: {describe(exc).replace('speech -> ', '', 1)}") from None
+    loaded = loaded.with_overrides(mesh=mesh, muscles=muscles, identity=identity_seed(identity), face=face)
+    _render(loaded, output, None, size, None, camera, framing, backend, False, False, antialias, supersample, force, 1,
+            look, onto, timings)
 
 
 @app.command()

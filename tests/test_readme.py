@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text()
 #: What the user brings: a command that names one of these is left to the face tests.
 NEEDS_A_PHOTO = ("me.jpg", "me/", "me.obj", "scan.")
-SIZED = ("render", "batch", "sheet", "dataset")
+SIZED = ("render", "say", "batch", "sheet", "dataset")
 
 
 def readme_commands() -> list[str]:

@@ -30,6 +30,7 @@ from ..physics.model import Model
 from ..physics.muscles import GAZE_ANGLE, PUPIL, TONGUE
 from ..physics.run import Progress, diagnostics, muscle_forces, run
 from ..physics.twins import on_threads
+from ..speech import placed_audio
 from ..timings import phase
 from .spec import Spec, activation_table, pose_table
 
@@ -65,7 +66,8 @@ class Animation:
     (facesim.face.own_face.FaceDirectory) whose head this is, if any: its texture and camera;
     progress : set while it is simulated in the background (``ready``); muscle_force :
     (frames, n, 3) the muscles' forces on each frame (eq. 3.1-3.25), when simulated
-    ``with_muscle_forces``.
+    ``with_muscle_forces``; audio : the sound of the clip (float32, mono, -1..1, at
+    ``audio_rate`` Hz, as long as the frames) when its spec speaks.
     """
 
     name: str
@@ -85,6 +87,8 @@ class Animation:
     face: object = None
     progress: Progress | None = field(default=None, repr=False, compare=False)
     muscle_force: np.ndarray | None = field(default=None, repr=False, compare=False)
+    audio: np.ndarray | None = field(default=None, repr=False, compare=False)
+    audio_rate: int = 0
 
     def ready(self, frame: int | None = None) -> "Animation":
         """Wait until ``frame`` (by default the last) is simulated, when the animation is
@@ -307,6 +311,9 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
         face=spec.face_directory,
         progress=progress,
         muscle_force=force,
+        audio=None if spec.speech is None else placed_audio(spec.speech.utterance, spec.speech.start,
+                                                            len(table) * spec.dt),
+        audio_rate=0 if spec.speech is None else spec.speech.utterance.rate,
     )
 
 

@@ -19,6 +19,7 @@ time step. A spec is a YAML file validated by pydantic (unknown fields are error
     identity: 3                 # the head's identity: a seed, or weights of its 100 modes
     muscles: my_face.muscles.yaml
     face: me/                   # a face directory (facesim face from-photo): its identity, muscles, texture
+    speech: {text: "Hello there", voice: en, rate: 175, start: 0.2}   # words said (facesim.speech)
 
 ``load_spec`` checks the file alone; ``activation_table`` checks the muscle names against
 the muscle file and turns the spec into a (frames, muscles) table once, before simulation.
@@ -39,6 +40,7 @@ from ..face.head import IDENTITY_MODES, identity_problem
 from ..face.material import MaterialSpec
 from ..physics.muscles import TONGUE, MuscleSet
 from ..schema import Strict, load_model
+from ..speech import Utterance, speech_curves, synthesize
 from .arkit import is_shape_name, shape_facs
 from .timeline import (
     AU_NAME,
@@ -133,6 +135,35 @@ class PoseTrack(_Curve):
         return self.curve(self.keys, dt, frames)
 
 
+class Speech(Strict):
+    """Words said (facesim.speech): eSpeak NG's ``voice`` says ``text`` at ``rate`` words
+    a minute, from ``start`` (s); its phonemes become visemes and the visemes the jaw's,
+    the lips' and the tongue's controls, on top of everything else the spec does. A spec
+    that speaks plays in real time: a frame is 1/fps s (its dt), and its frames cover the
+    words unless it gives them."""
+
+    text: str = Field(..., min_length=1)
+    voice: str = Field("en", min_length=1)
+    rate: int = Field(175, ge=80, le=450, description="words a minute")
+    start: float = Field(0.0, ge=0, description="seconds")
+
+    @model_validator(mode="after")
+    def _sayable(self):
+        try:
+            self.utterance
+        except InputError as exc:
+            raise ValueError(str(exc)) from None
+        return self
+
+    @property
+    def utterance(self) -> Utterance:
+        return synthesize(self.text, self.voice, self.rate)
+
+
+#: Frames a speaking spec runs on after its last word (s), for the face to come to rest.
+SPEECH_TAIL = 0.4
+
+
 class Include(Strict):
     """Another spec blended in with a weight."""
 
@@ -176,6 +207,7 @@ class Spec(Strict):
     identity: int | list[float] | None = Field(None, description=(
         "a head's identity (facesim.face.head): a seed for weights from the standard normal distribution, or the weights"))
     face: Path | None = Field(None, description="a face directory written by `facesim face from-photo`")
+    speech: Speech | None = Field(None, description="words said: text, voice, rate, start (s)")
     _source: Path | None = PrivateAttr(None)
 
     @field_validator("identity", mode="before")
@@ -224,6 +256,19 @@ class Spec(Strict):
             if "frames" in self.model_fields_set and self.frames != total:
                 raise ValueError(f"frames ({self.frames}) differs from the sequence's {total} frames; leave it out")
             object.__setattr__(self, "frames", total)
+        return self
+
+    @model_validator(mode="after")
+    def _real_time(self):
+        if self.speech is None:
+            return self
+        if "dt" in self.model_fields_set and abs(self.dt * self.fps - 1.0) > 1e-6:
+            raise ValueError(f"dt ({self.dt}) and fps ({self.fps}) differ: a spec with speech plays in real time, "
+                             "a frame every 1/fps s; leave dt out")
+        object.__setattr__(self, "dt", 1.0 / self.fps)
+        if "frames" not in self.model_fields_set and not self.sequence:
+            end = self.speech.start + self.speech.utterance.duration + SPEECH_TAIL
+            object.__setattr__(self, "frames", min(math.ceil(end / self.dt), MAX_FRAMES))
         return self
 
     @model_validator(mode="after")
@@ -365,7 +410,8 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
       co-occurrence rules;
     - ``timeline``: key-framed curves of muscles, action units and expressions;
     - ``include``: other specs' tables (at this spec's frames and Δt) times their weights;
-    - ``sequence``: expressions one after another, each reached over its transition.
+    - ``sequence``: expressions one after another, each reached over its transition;
+    - ``speech``: the visemes of the words said, coarticulated (facesim.speech).
 
     The sum is clipped to [0, 1]; below that it is linear in every weight and intensity.
     """
@@ -431,6 +477,15 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
     for name, curve in shape_curves.items():
         unit, where = shape_facs(name), f"arkit -> {name}"
         table += np.outer(np.clip(curve, 0, 1), au_vector(unit, where) if AU_NAME.fullmatch(unit) else muscle_vector(unit, where))
+
+    if spec.speech is not None:
+        times = np.arange(frames) * spec.dt - spec.speech.start
+        for control, curve in speech_curves(spec.speech.utterance, times, f"{spec.source}: speech").items():
+            both = [n for n in names if n in (control, f"{control}_l", f"{control}_r")]
+            if not both and control not in TONGUE:  # a mask has no tongue to speak with
+                fail("speech", f"the visemes need the {control.replace('_', ' ')}, which this face's muscle file "
+                     "does not have")
+            table[:, [names.index(n) for n in both]] += curve[:, None]
 
     for k, include in enumerate(spec.include):
         path = spec.resolve(include.spec)

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import itertools
 import os
+import re
+import subprocess
 import sys
 import time
 import zipfile
@@ -198,14 +200,19 @@ def iter_frames(animation: Animation, settings: RenderSettings, backend: str = "
                 progress(len(positions))
 
 
-def write_frames(frames, path: Path, kind: str, fps: float, replace: bool = True, count: int | None = None) -> None:
+def write_frames(frames, path: Path, kind: str, fps: float, replace: bool = True, count: int | None = None,
+                 audio: tuple[np.ndarray, int] | None = None) -> None:
     """Write rendered frames atomically as MP4, GIF or a PNG directory, verified by
     reading them back (``replace``: whether an existing output may be replaced).
     ``frames`` is an array or, with their ``count``, any iterable (``iter_frames``): an
-    MP4's encoder then works in its own process on each frame while the next renders."""
+    MP4's encoder then works in its own process on each frame while the next renders.
+    ``audio`` (samples, rate): the sound an MP4 carries (AAC), read back with it (a
+    GIF and PNGs carry none)."""
     import imageio.v3 as iio
 
     verify = _verify_frames(kind, len(frames) if count is None else count, fps)
+    if audio is not None and kind == "mp4":
+        verify = _with_sound(verify, (len(frames) if count is None else count) / fps, fps)
     frames = _drawn(frames)
     if kind == "png":
         with atomic_path(path, directory=True, replace=replace, verify=verify) as tmp:
@@ -220,9 +227,15 @@ def write_frames(frames, path: Path, kind: str, fps: float, replace: bool = True
             frames = iter(frames)
             first = next(frames)
             height, width = first.shape[:2]
+            sound = None
+            if audio is not None:
+                sound = tmp.with_name(tmp.name + ".wav")
+                write_wav(sound, *audio)
             writer = imageio_ffmpeg.write_frames(
                 str(tmp), (width, height), fps=fps, codec="libx264", pix_fmt_out="yuv420p",
-                output_params=["-crf", "18", "-preset", "veryfast"], macro_block_size=1,
+                output_params=["-crf", "18", "-preset", "veryfast"] + (["-b:a", "128k"] if sound else []),
+                macro_block_size=1, audio_path=None if sound is None else str(sound),
+                audio_codec=None if sound is None else "aac",
                 ffmpeg_log_level="quiet",  # its failures are found by reading the file back
             )
             writer.send(None)
@@ -232,12 +245,55 @@ def write_frames(frames, path: Path, kind: str, fps: float, replace: bool = True
                         writer.send(np.ascontiguousarray(frame))
             finally:
                 writer.close()
+                if sound is not None:
+                    sound.unlink(missing_ok=True)
         elif kind == "gif":  # Pillow directly: imageio's plugin flushes again at garbage collection
             from PIL import Image
 
             first, *rest = (Image.fromarray(frame) for frame in frames)
             with open(tmp, "wb") as stream, phase("encoding"):
                 first.save(stream, format="GIF", save_all=True, append_images=rest, duration=1000.0 / fps, loop=0)
+
+
+def write_wav(path: Path, samples: np.ndarray, rate: int) -> None:
+    """Mono 16-bit PCM WAV of ``samples`` (-1..1) at ``rate`` Hz."""
+    import wave
+
+    with wave.open(str(path), "wb") as wav:
+        wav.setnchannels(1)
+        wav.setsampwidth(2)
+        wav.setframerate(rate)
+        wav.writeframes((np.clip(samples, -1.0, 1.0) * 32767).astype("<i2").tobytes())
+
+
+def streams(path: Path) -> dict[str, float]:
+    """The duration (s) of each stream of a media file ffmpeg reads ('video', 'audio'),
+    from ffmpeg decoding the stream to its end (its last timestamp)."""
+    import imageio_ffmpeg
+
+    found = {}
+    for kind, letter in (("video", "v"), ("audio", "a")):
+        result = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(path), "-map",
+                                 f"0:{letter}:0", "-f", "null", "-"], capture_output=True, text=True, timeout=300)
+        times = re.findall(r"time=(\d+):(\d+):([\d.]+)", result.stderr)
+        if result.returncode == 0 and times:
+            h, m, sec = times[-1]
+            found[kind] = int(h) * 3600 + int(m) * 60 + float(sec)
+    return found
+
+
+def _with_sound(verify, seconds: float, fps: float):
+    """``verify``, and the MP4's sound there, as long as its frames within one frame."""
+
+    def check(tmp: Path) -> None:
+        verify(tmp)
+        found = streams(tmp)
+        if "audio" not in found:
+            raise WriteError(f"the written MP4 has no sound{why_short(tmp)}")
+        if abs(found["audio"] - seconds) > 1.0 / fps:
+            raise WriteError(f"the written MP4's sound lasts {found['audio']:.2f} s, its frames {seconds:.2f} s")
+
+    return check
 
 
 def _drawn(frames):
@@ -346,7 +402,11 @@ def write_animation(animation: Animation, path: str | Path, settings: RenderSett
         write_image(image, path, replace)
     else:
         frames = iter_frames(animation, settings, backend, jobs, progress, renderer)
-        write_frames(frames, path, kind, fps or animation.fps, replace, count=animation.frames)
+        audio = None if animation.audio is None else (animation.audio, animation.audio_rate)
+        if audio is not None and fps is not None and abs(fps - animation.fps) > 1e-9:
+            raise InputError(f"--fps {fps:g}: a clip with sound plays at its spec's {animation.fps:g} fps, in time "
+                             "with its sound; set fps in the spec")
+        write_frames(frames, path, kind, fps or animation.fps, replace, count=animation.frames, audio=audio)
     return RenderReport(animation.name, path, len(animation.active_muscles), 1 if kind == "image" else animation.frames,
                         animation.simulation_seconds, time.perf_counter() - start)
 
