@@ -243,6 +243,47 @@ def say(
 ):
     """Say TEXT: eSpeak NG speaks it, its phonemes become visemes, the face's muscles and
     jaw say them, and the MP4 carries the sound (docs/speech.md)."""
+    _speak(dict(text=text, voice=voice, rate=rate), text, blend, fps, output, size, camera, framing, backend, antialias,
+           supersample, force, mesh, muscles, identity, face, look, onto, timings)
+
+
+@app.command()
+@handled
+def speak(
+    recording: Path = typer.Argument(..., help="a recording of the words (WAV, MP3, FLAC, ...: any rate and channels)"),
+    text: Optional[str] = typer.Option(None, "--text", help="the words said in it (required: they are aligned to it)"),
+    output: Optional[str] = typer.Option(None, "-o", "--output", help="out.mp4 (with the recording's sound), out.gif, "
+                                         "out.npz, a directory of PNGs, out.glb, out.csv or out.pc2"),
+    force_long: bool = typer.Option(False, "--force-long", help="align a recording longer than two minutes"),
+    blend: Optional[str] = typer.Option(None, "--blend", help="expressions held under the words, e.g. happy=0.8"),
+    size: Optional[str] = typer.Option(None, "--size", help="frame size WxH (default 512x512; with --onto, the photo's)"),
+    fps: float = typer.Option(25.0, "--fps", help="frames a second (the clip plays in real time)"),
+    camera: str = CAMERA,
+    framing: str = FRAMING,
+    backend: str = BACKEND,
+    antialias: bool = ANTIALIAS,
+    supersample: bool = SUPERSAMPLE_OPTION,
+    force: bool = FORCE,
+    mesh: Optional[Path] = MESH,
+    muscles: Optional[Path] = MUSCLES,
+    identity: Optional[int] = IDENTITY,
+    face: Optional[Path] = FACE,
+    look: str = LOOK,
+    onto: Optional[Path] = typer.Option(None, "--onto", help="render through the face's fitted camera into this photo"),
+    timings: bool = typer.Option(False, "--timings", help="say where the time went"),
+):
+    """Speak a RECORDING: its words (--text) aligned to it by PocketSphinx, their phonemes
+    as visemes, the face saying them, and the recording's own sound in the MP4."""
+    if text is None:
+        raise InputError("speak: --text: the words said in the recording (facesim aligns them to it)")
+    _speak(dict(text=text, audio=recording.resolve(), long=force_long), recording.stem, blend, fps, output, size, camera,
+           framing, backend, antialias, supersample, force, mesh, muscles, identity, face, look, onto, timings)
+
+
+def _speak(speech: dict, title: str, blend, fps, output, size, camera, framing, backend, antialias, supersample, force,
+           mesh, muscles, identity, face, look, onto, timings):
+    """`say` and `speak`: a spec of the words (``speech``) with the expressions of
+    ``blend`` under them, rendered as `render` renders a spec."""
     from pydantic import ValidationError
 
     from . import timings as phases
@@ -254,12 +295,13 @@ def say(
     if not 0 < fps <= 240:
         raise InputError(f"--fps: must be between 0 and 240, got {fps}")
     include = [] if blend is None else [i.model_dump() for i in blend_spec(blend).include]
-    words = "_".join("".join(c for c in w if c.isalnum()) for w in text.split()[:4]).strip("_").lower() or "speech"
+    words = "_".join("".join(c for c in w if c.isalnum()) for w in title.split()[:4]).strip("_").lower() or "speech"
     try:
-        loaded = Spec.model_validate(dict(name=f"say_{words}", fps=fps, onset=0, include=include,
-                                          speech=dict(text=text, voice=voice, rate=rate)))
+        loaded = Spec.model_validate(dict(name=f"say_{words}" if "audio" not in speech else words, fps=fps, onset=0,
+                                          include=include, speech=speech))
     except ValidationError as exc:
-        raise InputError(f"say: {describe(exc).replace('speech -> ', '', 1)}") from None
+        raise InputError(f"{'say' if 'audio' not in speech else 'speak'}: "
+                         f"{describe(exc).replace('speech: Value error, ', '', 1).replace('speech -> ', '', 1)}") from None
     loaded = loaded.with_overrides(mesh=mesh, muscles=muscles, identity=identity_seed(identity), face=face)
     _render(loaded, output, None, size, None, camera, framing, backend, False, False, antialias, supersample, force, 1,
             look, onto, timings)

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import Field, PrivateAttr, ValidationError, field_validator, model_validator
+from pydantic import Field, PrivateAttr, ValidationError, ValidationInfo, field_validator, model_validator
 
 from ..config import DEFAULT_MESH, DEFAULT_MUSCLES, LIBRARY, MUSCLE_PRESETS
 from ..errors import InputError
@@ -40,7 +40,7 @@ from ..face.head import IDENTITY_MODES, identity_problem
 from ..face.material import MaterialSpec
 from ..physics.muscles import TONGUE, MuscleSet
 from ..schema import Strict, load_model
-from ..speech import Utterance, speech_curves, synthesize
+from ..speech import Utterance, recorded, speech_curves, synthesize
 from .arkit import is_shape_name, shape_facs
 from .timeline import (
     AU_NAME,
@@ -137,18 +137,24 @@ class PoseTrack(_Curve):
 
 class Speech(Strict):
     """Words said (facesim.speech): eSpeak NG's ``voice`` says ``text`` at ``rate`` words
-    a minute, from ``start`` (s); its phonemes become visemes and the visemes the jaw's,
+    a minute, or a recording (``audio``, relative to the spec) of ``text`` is aligned to
+    its words, from ``start`` (s); the phonemes become visemes and the visemes the jaw's,
     the lips' and the tongue's controls, on top of everything else the spec does. A spec
     that speaks plays in real time: a frame is 1/fps s (its dt), and its frames cover the
-    words unless it gives them."""
+    words unless it gives them. ``long``: a recording over two minutes is wanted."""
 
     text: str = Field(..., min_length=1)
     voice: str = Field("en", min_length=1)
     rate: int = Field(175, ge=80, le=450, description="words a minute")
     start: float = Field(0.0, ge=0, description="seconds")
+    audio: Path | None = Field(None, description="a recording of the text (any format ffmpeg reads)")
+    long: bool = False
 
     @model_validator(mode="after")
-    def _sayable(self):
+    def _sayable(self, info: ValidationInfo):
+        directory = (info.context or {}).get("directory")
+        if self.audio is not None and not self.audio.is_absolute() and directory is not None:
+            object.__setattr__(self, "audio", Path(directory) / self.audio)
         try:
             self.utterance
         except InputError as exc:
@@ -157,6 +163,8 @@ class Speech(Strict):
 
     @property
     def utterance(self) -> Utterance:
+        if self.audio is not None:
+            return recorded(self.audio, self.text, self.long)
         return synthesize(self.text, self.voice, self.rate)
 
 
@@ -363,7 +371,7 @@ def load_spec(path: str | Path) -> Spec:
     """Read and validate an expression spec (one-line InputError on any problem): a file,
     or a name of the library (``happy``)."""
     path = library_spec(path)
-    spec = load_model(path, Spec)
+    spec = load_model(path, Spec, context={"directory": path.parent})  # a recording's path is relative to the spec
     spec._source = path
     return spec
 

@@ -1,7 +1,8 @@
 """Speech, a way into facesim below the animation: words said by eSpeak NG (``espeak``:
 the waveform and its timed phonemes), the phonemes as MPEG-4's visemes and the visemes
 as curves of facesim's controls, coarticulated by Cohen and Massaro's dominance model
-(``coarticulation``, the table in ``visemes.yaml``). A spec's ``speech:`` track becomes
+(``coarticulation``, the table in ``visemes.yaml``); or a recording's sound and its
+phonemes, aligned to its words by PocketSphinx (``recording``). A spec's ``speech:`` track becomes
 these curves in its activation table (facesim.animation.spec), and the waveform the
 sound of its video.
 """
@@ -12,8 +13,9 @@ import numpy as np
 
 from .coarticulation import control_curves, segments
 from .espeak import Phone, Utterance, synthesize
+from .recording import recorded
 
-__all__ = ["Phone", "Utterance", "placed_audio", "speech_curves", "synthesize"]
+__all__ = ["Phone", "Utterance", "placed_audio", "recorded", "speech_curves", "synthesize"]
 
 
 def speech_curves(utterance: Utterance, times: np.ndarray, where: str = "speech") -> dict[str, np.ndarray]:

@@ -8,14 +8,23 @@ next one starts. eSpeak's pauses (between phrases, at the end) are events with a
 name and become silences. Stress marks are dropped (what the face shows of stress is in
 the timing and the jaw's opening, not in the symbol).
 
-The library keeps one synthesiser per process, so calls are serialised by a lock.
+The library keeps one synthesiser per process, and what one text leaves in it changes
+how the next is said: the same sentence said twice in one process came out up to 12 ms
+apart in its phonemes' times (its length by 250 samples), and neither seeding the C
+library's ``rand()``, ``espeak_Cancel`` nor an end pause kept it the same; starting it
+again after ``espeak_Terminate`` hangs. So each text is said by a process of its own
+(``python -m facesim.speech.espeak``, 0.2-0.3 s), as eSpeak NG's own command does it:
+the same text, voice and rate give the same samples and times, whatever was said before.
 """
 
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
-import threading
+import io
+import os
+import subprocess
+import sys
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -60,7 +69,6 @@ class _Voice(ctypes.Structure):
 
 
 _CALLBACK = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(ctypes.c_short), ctypes.c_int, ctypes.POINTER(_Event))
-_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -158,9 +166,18 @@ class _Library:
         return samples, self.events
 
 
-@lru_cache(maxsize=1)
-def _library() -> _Library:
-    return _Library()
+def _said(text: str, voice: str, rate: int) -> tuple[np.ndarray, list[tuple[int, str]], int]:
+    """eSpeak NG's samples, phoneme events (sample, name) and rate for ``text``, from a
+    process of its own (module docstring); InputError with its one line."""
+    package = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [package, os.environ.get("PYTHONPATH")])))
+    result = subprocess.run([sys.executable, "-m", "facesim.speech.espeak", voice, str(rate)], input=text.encode(),
+                            capture_output=True, env=env, timeout=600)
+    if result.returncode != 0:
+        lines = result.stderr.decode(errors="replace").strip().splitlines()
+        raise InputError(lines[-1] if lines else f"eSpeak NG failed (exit code {result.returncode})")
+    said = np.load(io.BytesIO(result.stdout))
+    return said["samples"], list(zip(said["at"].tolist(), said["names"].tolist())), int(said["rate"])
 
 
 def check_text(text: str, where: str) -> str:
@@ -183,18 +200,36 @@ def synthesize(text: str, voice: str = "en", rate: int = RATE, where: str = "spe
     text = check_text(text, f"{where} -> text")
     if not RATES[0] <= rate <= RATES[1]:
         raise InputError(f"{where} -> rate: {rate}; expected {RATES[0]}-{RATES[1]} words a minute")
-    with _LOCK:
-        library = _library()
-        try:
-            samples, events = library.synthesize(text, voice, rate)
-        except InputError as exc:
-            raise InputError(f"{where} -> {exc}") from None
+    try:
+        samples, events, fs = _said(text, voice, rate)
+    except InputError as exc:
+        raise InputError(f"{where} -> {exc}") from None
     if len(samples) == 0 or not any(name for _, name in events):
         raise InputError(f"{where} -> text: eSpeak NG said nothing for {text[:40]!r}")
-    fs = library.rate
     starts = [sample / fs for sample, _ in events] + [len(samples) / fs]
     phones = tuple(Phone(name.translate(_MARKS), starts[k], starts[k + 1]) for k, (_, name) in enumerate(events)
                    if starts[k + 1] > starts[k])
     audio = (samples.astype(np.float32) / 32768.0)
     audio.flags.writeable = False
     return Utterance(audio, fs, phones, text)
+
+
+def _main() -> int:
+    """``python -m facesim.speech.espeak VOICE RATE`` < text: the samples, the phoneme
+    events and the rate as an NPZ on standard output; an InputError's line on standard
+    error and exit code 2."""
+    try:
+        library = _Library()
+        samples, events = library.synthesize(sys.stdin.read(), sys.argv[1], int(sys.argv[2]))
+    except InputError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    out = io.BytesIO()
+    np.savez(out, samples=samples, at=np.array([a for a, _ in events], dtype=np.int64),
+             names=np.array([n for _, n in events], dtype=str), rate=np.array(library.rate))
+    sys.stdout.buffer.write(out.getvalue())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main())
