@@ -185,6 +185,8 @@ def _render(loaded, output, frame, size, fps, camera, framing, backend, wirefram
         settings = replace(settings, width=width, height=height)
     output = output or str(Path("out") / f"{loaded.title}.mp4")
     kind = check_output(output, force, settings)
+    if loaded.speech is not None and kind != "mp4":
+        notice(f"{output}: carries no sound (an MP4 carries the words' sound)")
     if frame is not None and (kind != "image" or not 0 <= frame < loaded.frames):
         raise InputError(f"--frame: with -o x.png, a frame from 0 to {loaded.frames - 1}, got {frame}" if kind == "image"
                          else f"--frame: only with a .png output (one frame), not {output}")

@@ -311,3 +311,14 @@ def test_bad_recordings_are_one_line_and_write_nothing(tmp_path):
         assert result.returncode == 2 and fragment in result.stderr, (args, result.stderr)
         assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
     assert sorted(tmp_path.iterdir()) == before
+
+
+def test_an_output_without_sound_says_so_and_a_recording_takes_no_voice(tmp_path):
+    out = tmp_path / "hi.gif"
+    result = subprocess.run([sys.executable, "-m", "facesim", "say", "Hi", "-o", str(out), "--size", "64x64"],
+                            capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert result.returncode == 0 and "hi.gif: carries no sound" in result.stderr and out.stat().st_size > 0
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match="voice and rate are eSpeak NG's"):
+        Spec.model_validate(dict(speech=dict(text="Hi", audio=str(tmp_path / "hi.wav"), voice="en-us")))

@@ -152,6 +152,8 @@ class Speech(Strict):
 
     @model_validator(mode="after")
     def _sayable(self, info: ValidationInfo):
+        if self.audio is not None and {"voice", "rate"} & self.model_fields_set:
+            raise ValueError("voice and rate are eSpeak NG's; a recording (audio) is said as it was recorded")
         directory = (info.context or {}).get("directory")
         if self.audio is not None and not self.audio.is_absolute() and directory is not None:
             object.__setattr__(self, "audio", Path(directory) / self.audio)
