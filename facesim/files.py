@@ -30,6 +30,7 @@ import json
 import os
 import shutil
 import signal
+import sys
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -77,15 +78,27 @@ def handling_termination():
         _received.append(signum)
         raise _exception_for(signum)
 
+    unraisable = sys.unraisablehook
+
+    def swallowed(event):
+        """Where Python cannot raise (an at-fork handler, a finaliser), the signal's
+        exception is printed as "Exception ignored" with a traceback: a SIGTERM while the
+        MP4's encoder was being started did that (CI). It is recorded, and
+        check_terminated raises it again where the work can stop."""
+        if not (isinstance(event.exc_value, (Terminated, KeyboardInterrupt)) and _received):
+            unraisable(event)
+
     _received.clear()
     for signum, handler in saved.items():
         if signum != signal.SIGINT or handler is signal.default_int_handler:
             signal.signal(signum, raise_terminated)
+    sys.unraisablehook = swallowed
     try:
         yield
     finally:
         for signum, handler in saved.items():
             signal.signal(signum, handler)
+        sys.unraisablehook = unraisable
         _received.clear()
 
 
