@@ -5,7 +5,7 @@ with the sample each starts at, from the library's phoneme events
 
 A phoneme event marks where a phoneme's sound starts in the output; it ends where the
 next one starts. eSpeak's pauses (between phrases, at the end) are events with an empty
-name and become silences. Stress marks are dropped (what the face shows of stress is in
+name and become silences, one for each run of them (a comma gives two). Stress marks are dropped (what the face shows of stress is in
 the timing and the jaw's opening, not in the symbol).
 
 The library keeps one synthesiser per process, and what one text leaves in it changes
@@ -207,11 +207,18 @@ def synthesize(text: str, voice: str = "en", rate: int = RATE, where: str = "spe
     if len(samples) == 0 or not any(name for _, name in events):
         raise InputError(f"{where} -> text: eSpeak NG said nothing for {text[:40]!r}")
     starts = [sample / fs for sample, _ in events] + [len(samples) / fs]
-    phones = tuple(Phone(name.translate(_MARKS), starts[k], starts[k + 1]) for k, (_, name) in enumerate(events)
-                   if starts[k + 1] > starts[k])
+    phones: list[Phone] = []
+    for k, (_, name) in enumerate(events):
+        symbol = name.translate(_MARKS)
+        if starts[k + 1] <= starts[k]:
+            continue
+        if phones and not symbol and not phones[-1].symbol:  # eSpeak ends a phrase with two pauses: one silence
+            phones[-1] = Phone("", phones[-1].start, starts[k + 1])
+        else:
+            phones.append(Phone(symbol, starts[k], starts[k + 1]))
     audio = (samples.astype(np.float32) / 32768.0)
     audio.flags.writeable = False
-    return Utterance(audio, fs, phones, text)
+    return Utterance(audio, fs, tuple(phones), text)
 
 
 def _main() -> int:
