@@ -321,3 +321,18 @@ def test_an_output_without_sound_says_so_and_a_recording_takes_no_voice(tmp_path
 
     with pytest.raises(ValidationError, match="voice and rate are eSpeak NG's"):
         Spec.model_validate(dict(speech=dict(text="Hi", audio=str(tmp_path / "hi.wav"), voice="en-us")))
+
+
+@pytest.mark.parametrize("voice, text", [
+    ("de", "Guten Morgen, ich möchte ein Brötchen und zwei Äpfel, bitte. Über die Brücke."),
+    ("fr", "Bonjour, je voudrais un pain au chocolat et une tasse de thé, s'il vous plaît."),
+    ("es", "Buenos días, quiero un café con leche y una tostada, por favor. Mañana llueve."),
+    ("it", "Buongiorno, vorrei un caffè e una brioche, grazie mille. Gli gnocchi."),
+    ("nl", "Goedemorgen, ik wil graag een kopje koffie met melk."),
+])
+def test_other_voices_phonemes_each_have_a_viseme(voice, text):
+    """--voice takes eSpeak NG's languages: every phoneme their sentences use has a viseme
+    (a phoneme with none is an error naming it), the lips' closing and the open jaw's among them."""
+    phones = synthesize(text, voice).phones
+    found = segments(phones, voice)
+    assert len(found) >= len(phones) and {s.viseme.number for s in found} >= {1, 10}

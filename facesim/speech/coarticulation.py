@@ -95,8 +95,9 @@ class VisemeTable:
 
 
 def _bare(symbol: str) -> str:
-    """``symbol`` without its diacritics (combining marks) and length marks."""
-    return "".join(c for c in unicodedata.normalize("NFD", symbol) if not unicodedata.combining(c) and c not in "ːˑ")
+    """``symbol`` without its diacritics (combining marks), length marks and eSpeak's
+    ``-`` (French's unstressed schwa, ``ə-``)."""
+    return "".join(c for c in unicodedata.normalize("NFD", symbol) if not unicodedata.combining(c) and c not in "ːˑ-")
 
 
 @lru_cache(maxsize=1)
