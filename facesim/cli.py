@@ -218,71 +218,81 @@ def _render(loaded, output, frame, size, fps, camera, framing, backend, wirefram
         typer.echo(phases.summary(phases.process_age()), err=True)
 
 
+def _speech_options(
+    blend: Optional[str] = typer.Option(None, "--blend", help="expressions held under the words, e.g. happy=0.8"),
+    size: Optional[str] = typer.Option(None, "--size", help="frame size WxH (default 512x512; with --onto, the photo's)"),
+    fps: float = typer.Option(25.0, "--fps", help="frames a second (the clip plays in real time)"),
+    camera: str = CAMERA,
+    framing: str = FRAMING,
+    backend: str = BACKEND,
+    antialias: bool = ANTIALIAS,
+    supersample: bool = SUPERSAMPLE_OPTION,
+    force: bool = FORCE,
+    mesh: Optional[Path] = MESH,
+    muscles: Optional[Path] = MUSCLES,
+    identity: Optional[int] = IDENTITY,
+    face: Optional[Path] = FACE,
+    look: str = LOOK,
+    onto: Optional[Path] = typer.Option(None, "--onto", help="render through the face's fitted camera into this photo"),
+    timings: bool = typer.Option(False, "--timings", help="say where the time went"),
+):
+    """The options `say` and `speak` share (``with_speech_options``)."""
+
+
+def with_speech_options(command):
+    """``command`` (whose last parameter, ``options``, takes them as a dict) with the
+    options of ``_speech_options`` after its own, as typer reads a command's signature."""
+    import inspect
+
+    shared = inspect.signature(_speech_options).parameters
+    own = [p for name, p in inspect.signature(command).parameters.items() if name != "options"]
+
+    @functools.wraps(command)
+    def wrapper(**given):
+        return command(**{k: v for k, v in given.items() if k not in shared},
+                       options={k: v for k, v in given.items() if k in shared})
+
+    wrapper.__signature__ = inspect.Signature(own + list(shared.values()))
+    wrapper.__annotations__ = {**{k: v for k, v in command.__annotations__.items() if k != "options"},
+                               **_speech_options.__annotations__}
+    return wrapper
+
+
 @app.command()
 @handled
+@with_speech_options
 def say(
     text: str = typer.Argument(..., help="the words to say"),
     output: Optional[str] = typer.Option(None, "-o", "--output", help="out.mp4 (with the sound), out.gif, out.npz, "
                                          "a directory of PNGs, out.glb, out.csv or out.pc2, as `render` takes"),
     voice: str = typer.Option("en", "--voice", help="eSpeak NG's voice or language (en, en-us, de, fr, ...)"),
     rate: int = typer.Option(175, "--rate", help="words a minute (80-450)"),
-    blend: Optional[str] = typer.Option(None, "--blend", help="expressions held under the words, e.g. happy=0.8"),
-    size: Optional[str] = typer.Option(None, "--size", help="frame size WxH (default 512x512; with --onto, the photo's)"),
-    fps: float = typer.Option(25.0, "--fps", help="frames a second (the clip plays in real time)"),
-    camera: str = CAMERA,
-    framing: str = FRAMING,
-    backend: str = BACKEND,
-    antialias: bool = ANTIALIAS,
-    supersample: bool = SUPERSAMPLE_OPTION,
-    force: bool = FORCE,
-    mesh: Optional[Path] = MESH,
-    muscles: Optional[Path] = MUSCLES,
-    identity: Optional[int] = IDENTITY,
-    face: Optional[Path] = FACE,
-    look: str = LOOK,
-    onto: Optional[Path] = typer.Option(None, "--onto", help="render through the face's fitted camera into this photo"),
-    timings: bool = typer.Option(False, "--timings", help="say where the time went"),
+    options: dict = None,
 ):
     """Say TEXT: eSpeak NG speaks it, its phonemes become visemes, the face's muscles and
     jaw say them, and the MP4 carries the sound (docs/speech.md)."""
-    _speak(dict(text=text, voice=voice, rate=rate), text, blend, fps, output, size, camera, framing, backend, antialias,
-           supersample, force, mesh, muscles, identity, face, look, onto, timings)
+    _speak(dict(text=text, voice=voice, rate=rate), text, output, **options)
 
 
 @app.command()
 @handled
+@with_speech_options
 def speak(
     recording: Path = typer.Argument(..., help="a recording of the words (WAV, MP3, FLAC, ...: any rate and channels)"),
     text: Optional[str] = typer.Option(None, "--text", help="the words said in it (required: they are aligned to it)"),
     output: Optional[str] = typer.Option(None, "-o", "--output", help="out.mp4 (with the recording's sound), out.gif, "
                                          "out.npz, a directory of PNGs, out.glb, out.csv or out.pc2"),
     force_long: bool = typer.Option(False, "--force-long", help="align a recording longer than two minutes"),
-    blend: Optional[str] = typer.Option(None, "--blend", help="expressions held under the words, e.g. happy=0.8"),
-    size: Optional[str] = typer.Option(None, "--size", help="frame size WxH (default 512x512; with --onto, the photo's)"),
-    fps: float = typer.Option(25.0, "--fps", help="frames a second (the clip plays in real time)"),
-    camera: str = CAMERA,
-    framing: str = FRAMING,
-    backend: str = BACKEND,
-    antialias: bool = ANTIALIAS,
-    supersample: bool = SUPERSAMPLE_OPTION,
-    force: bool = FORCE,
-    mesh: Optional[Path] = MESH,
-    muscles: Optional[Path] = MUSCLES,
-    identity: Optional[int] = IDENTITY,
-    face: Optional[Path] = FACE,
-    look: str = LOOK,
-    onto: Optional[Path] = typer.Option(None, "--onto", help="render through the face's fitted camera into this photo"),
-    timings: bool = typer.Option(False, "--timings", help="say where the time went"),
+    options: dict = None,
 ):
     """Speak a RECORDING: its words (--text) aligned to it by PocketSphinx, their phonemes
     as visemes, the face saying them, and the recording's own sound in the MP4."""
     if text is None:
         raise InputError("speak: --text: the words said in the recording (facesim aligns them to it)")
-    _speak(dict(text=text, audio=recording.resolve(), long=force_long), recording.stem, blend, fps, output, size, camera,
-           framing, backend, antialias, supersample, force, mesh, muscles, identity, face, look, onto, timings)
+    _speak(dict(text=text, audio=recording.resolve(), long=force_long), recording.stem, output, **options)
 
 
-def _speak(speech: dict, title: str, blend, fps, output, size, camera, framing, backend, antialias, supersample, force,
+def _speak(speech: dict, title: str, output, blend, size, fps, camera, framing, backend, antialias, supersample, force,
            mesh, muscles, identity, face, look, onto, timings):
     """`say` and `speak`: a spec of the words (``speech``) with the expressions of
     ``blend`` under them, rendered as `render` renders a spec."""
