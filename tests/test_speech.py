@@ -113,12 +113,15 @@ def test_the_lips_round_ahead_of_a_rounded_vowel_and_the_jaw_stays_open_between_
     assert nasal and all(banana["jaw"][k] > 0.4 * banana["jaw"][vowels].max() for k in nasal)
 
 
-@pytest.mark.parametrize("text", SENTENCES[:1])
+@pytest.mark.parametrize("text", SENTENCES)
 def test_the_mouth_opens_in_time_with_the_sound(sentences, text):
-    """The lips' opening over time (the skin's inner-lip landmarks, as an NPZ keeps them)
-    and the sound's energy per frame are best aligned at a lag of at most one frame."""
+    """The lips' opening over time (the head's inner-lip gap) and the sound's energy per
+    frame are best aligned at a lag of at most one frame. Measured: the mouth one frame
+    (40 ms) after the sound on both sentences, and on two more tried. (The skin's
+    inner-lip landmarks, 13 and 14, are no measure of it: at /f v/ the lower lip rolls and
+    they part, which put the best lag at 4 frames on the second sentence.)"""
     spec, animation = sentences[text]
-    opening = np.linalg.norm(animation.positions[:, 13] - animation.positions[:, 14], axis=1)
+    opening = lip_gap(animation, head_frames(animation))
     per = int(round(animation.audio_rate * spec.dt))
     energy = np.sqrt((animation.audio[:per * spec.frames].reshape(spec.frames, per) ** 2).mean(axis=1))
     a, b = (opening - opening.mean()) / opening.std(), (energy - energy.mean()) / energy.std()
