@@ -164,6 +164,9 @@ def _render(loaded, output, frame, size, fps, camera, framing, backend, wirefram
     from .export.output import EXPORTS, check_output, drawn_in_order, progress_bar, write_animation
     from .physics.run import compiled_here
 
+    if fps is not None and loaded.speech is not None and abs(fps - loaded.fps) > 1e-9:
+        raise InputError(f"--fps {fps:g}: {loaded.source} speaks, in real time at its own {loaded.fps:g} fps; "
+                         "set fps in the spec")
     if onto is not None and size is not None:
         raise InputError(f"--size: not with --onto, whose frames take the photo's size; got --size {size}")
     settings = settings_from(size or "512x512", camera, wireframe, show_muscles, antialias, framing, look, onto,
@@ -185,8 +188,8 @@ def _render(loaded, output, frame, size, fps, camera, framing, backend, wirefram
         settings = replace(settings, width=width, height=height)
     output = output or str(Path("out") / f"{loaded.title}.mp4")
     kind = check_output(output, force, settings)
-    if loaded.speech is not None and kind != "mp4":
-        notice(f"{output}: carries no sound (an MP4 carries the words' sound)")
+    if loaded.speech is not None and kind not in ("mp4", "npz"):
+        notice(f"{output}: carries no sound (an MP4 or an NPZ carries the words' sound)")
     if frame is not None and (kind != "image" or not 0 <= frame < loaded.frames):
         raise InputError(f"--frame: with -o x.png, a frame from 0 to {loaded.frames - 1}, got {frame}" if kind == "image"
                          else f"--frame: only with a .png output (one frame), not {output}")

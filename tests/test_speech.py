@@ -180,6 +180,11 @@ def test_a_speaking_spec_plays_in_real_time(tmp_path):
     result = subprocess.run([sys.executable, "-m", "facesim", "render", str(spec), "-o", str(tmp_path / "x.mp4")],
                             capture_output=True, text=True, cwd=tmp_path, timeout=120)
     assert result.returncode == 2 and "a spec with speech plays in real time" in result.stderr
+    spec.write_text('speech: {text: "Hello there"}\n')
+    result = subprocess.run([sys.executable, "-m", "facesim", "render", str(spec), "-o", str(tmp_path / "x.mp4"), "--fps",
+                             "30"], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert result.returncode == 2 and "speaks, in real time at its own 25 fps" in result.stderr, result.stderr
+    assert not (tmp_path / "x.mp4").exists()
     spec.write_text('speech: {text: "Hello there"}\nfps: 30\n')
     loaded = facesim.load_spec(spec)
     assert loaded.dt == pytest.approx(1 / 30) and loaded.frames == int(np.ceil((synthesize("Hello there").duration + 0.4) * 30))
@@ -313,6 +318,15 @@ def test_bad_recordings_are_one_line_and_write_nothing(tmp_path):
         assert result.returncode == 2 and fragment in result.stderr, (args, result.stderr)
         assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
     assert sorted(tmp_path.iterdir()) == before
+
+
+def test_a_speaking_specs_npz_keeps_its_sound_beside_its_frames(sentences, tmp_path):
+    spec, animation = sentences[SENTENCES[0]]
+    facesim.render(animation, tmp_path / "bob.npz")
+    with np.load(tmp_path / "bob.npz") as npz:
+        assert int(npz["audio_rate"]) == animation.audio_rate == 22050
+        assert len(npz["audio"]) == round(spec.frames * spec.dt * 22050) and len(npz["positions"]) == spec.frames
+        assert np.array_equal(npz["audio"], animation.audio)
 
 
 def test_an_output_without_sound_says_so_and_a_recording_takes_no_voice(tmp_path):

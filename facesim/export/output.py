@@ -337,7 +337,8 @@ def write_npz(animation: Animation, path: Path, replace: bool = True) -> None:
     shape; the simulated skin is apart (``skin_positions``, ``skin_faces``, ``skin_rest``,
     and ``skin_on_head``, the head's vertex each skin vertex lies on). The head's frames
     are written one by one into the archive, never held together. On a face mask,
-    ``positions`` are its own vertices (frames, n, 3)."""
+    ``positions`` are its own vertices (frames, n, 3). A spec that speaks adds its sound:
+    ``audio`` (float32, mono, as long as the frames) at ``audio_rate`` Hz."""
     if animation.streamed:
         raise ValueError("an NPZ holds every frame's positions: simulate without stream")
     arrays = dict(
@@ -345,6 +346,8 @@ def write_npz(animation: Animation, path: Path, replace: bool = True) -> None:
         kinetic_energy=animation.kinetic_energy,
         pose=np.zeros((animation.frames, 5)) if animation.pose is None else animation.pose,
     )
+    if animation.audio is not None:  # a speaking spec's sound, as long as its frames
+        arrays.update(audio=animation.audio, audio_rate=np.array(animation.audio_rate))
     head = None if animation.figure is None else animation.model.mesh.head
     if head is None:
         arrays.update(positions=animation.positions, faces=animation.faces, rest=animation.rest)
