@@ -310,12 +310,13 @@ def _speak(speech: dict, title: str, output, blend, size, fps, camera, framing, 
     if not 0 < fps <= 240:
         raise InputError(f"--fps: must be between 0 and 240, got {fps}")
     include = [] if blend is None else [i.model_dump() for i in blend_spec(blend).include]
+    command = "speak" if "audio" in speech else "say"
     words = "_".join("".join(c for c in w if c.isalnum()) for w in title.split()[:4]).strip("_").lower() or "speech"
     try:
-        loaded = Spec.model_validate(dict(name=f"say_{words}" if "audio" not in speech else words, fps=fps, onset=0,
+        loaded = Spec.model_validate(dict(name=words if command == "speak" else f"say_{words}", fps=fps, onset=0,
                                           include=include, speech=speech))
     except ValidationError as exc:
-        raise InputError(f"{'say' if 'audio' not in speech else 'speak'}: "
+        raise InputError(f"{command}: "
                          f"{describe(exc).replace('speech: Value error, ', '', 1).replace('speech -> ', '', 1)}") from None
     loaded = loaded.with_overrides(mesh=mesh, muscles=muscles, identity=identity_seed(identity), face=face)
     _render(loaded, output, None, size, None, camera, framing, backend, False, False, antialias, supersample, force, 1,

@@ -40,7 +40,7 @@ from ..face.head import IDENTITY_MODES, identity_problem
 from ..face.material import MaterialSpec
 from ..physics.muscles import TONGUE, MuscleSet
 from ..schema import Strict, load_model
-from ..speech import Utterance, recorded, speech_curves, synthesize
+from ..speech import RATE, RATES, Utterance, recorded, speech_curves, synthesize
 from .arkit import is_shape_name, shape_facs
 from .timeline import (
     AU_NAME,
@@ -145,7 +145,7 @@ class Speech(Strict):
 
     text: str = Field(..., min_length=1)
     voice: str = Field("en", min_length=1)
-    rate: int = Field(175, ge=80, le=450, description="words a minute")
+    rate: int = Field(RATE, ge=RATES[0], le=RATES[1], description="words a minute")
     start: float = Field(0.0, ge=0, description="seconds")
     audio: Path | None = Field(None, description="a recording of the text (any format ffmpeg reads)")
     long: bool = False

@@ -210,9 +210,10 @@ def write_frames(frames, path: Path, kind: str, fps: float, replace: bool = True
     GIF and PNGs carry none)."""
     import imageio.v3 as iio
 
-    verify = _verify_frames(kind, len(frames) if count is None else count, fps)
-    if audio is not None and kind == "mp4":
-        verify = _with_sound(verify, (len(frames) if count is None else count) / fps, fps)
+    count = len(frames) if count is None else count
+    verify = _verify_frames(kind, count, fps)
+    if audio is not None and kind == "mp4":  # and, at another fps than its spec's, it is out of time with them
+        verify = _with_sound(verify, count / fps, fps)
     frames = _drawn(frames)
     if kind == "png":
         with atomic_path(path, directory=True, replace=replace, verify=verify) as tmp:
@@ -406,9 +407,6 @@ def write_animation(animation: Animation, path: str | Path, settings: RenderSett
     else:
         frames = iter_frames(animation, settings, backend, jobs, progress, renderer)
         audio = None if animation.audio is None else (animation.audio, animation.audio_rate)
-        if audio is not None and fps is not None and abs(fps - animation.fps) > 1e-9:
-            raise InputError(f"--fps {fps:g}: a clip with sound plays at its spec's {animation.fps:g} fps, in time "
-                             "with its sound; set fps in the spec")
         write_frames(frames, path, kind, fps or animation.fps, replace, count=animation.frames, audio=audio)
     return RenderReport(animation.name, path, len(animation.active_muscles), 1 if kind == "image" else animation.frames,
                         animation.simulation_seconds, time.perf_counter() - start)

@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 
 from .coarticulation import control_curves, segments
-from .espeak import Phone, Utterance, synthesize
+from .espeak import RATE, RATES, Phone, Utterance, synthesize
 from .recording import recorded
 
-__all__ = ["Phone", "Utterance", "placed_audio", "recorded", "speech_curves", "synthesize"]
+__all__ = ["RATE", "RATES", "Phone", "Utterance", "placed_audio", "recorded", "speech_curves", "synthesize"]
 
 
 def speech_curves(utterance: Utterance, times: np.ndarray, where: str = "speech") -> dict[str, np.ndarray]:

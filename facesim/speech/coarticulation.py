@@ -15,7 +15,7 @@ target (their eq. 2):
 
 τ is measured from the middle half of the phoneme (0 inside it), at least ``HOLD`` long,
 so that a long vowel holds its shape and a short consonant still reaches its own. What the model gives:
-a bilabial's seal dominates whatever surrounds it (α = 1 against its neighbours' 0.1),
+a bilabial's seal dominates whatever surrounds it (α = 10 against its neighbours' 0.1-0.5),
 so /p b m/ close the lips; the lips round ahead of a rounded vowel (the rounding's
 anticipatory rate θ← is the lowest: it spreads over the consonants before it, whose
 own dominance on rounding is low); and the jaw, which vowels dominate and consonants
@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import unicodedata
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -72,7 +72,7 @@ class VisemeTable:
     controls: tuple[str, ...]
     visemes: tuple[Viseme, ...]
 
-    @property
+    @cached_property
     def by_phoneme(self) -> dict[str, Viseme]:
         return {p: v for v in self.visemes for p in v.phonemes}
 

@@ -23,7 +23,8 @@ import numpy as np
 from ..errors import InputError
 from .espeak import Phone, Utterance
 
-#: The aligner's rate (Hz) and the rate the sound is kept at for the video.
+#: The aligner's rate (Hz) and the rate the sound is read at and kept for the video (the
+#: aligner's resampled from it: one reading of the file).
 ALIGN_RATE, PLAYBACK_RATE = 16000, 44100
 #: A recording longer than this (s) is refused unless asked for (``long``): a typo'd path
 #: to an audiobook would otherwise align for minutes.
@@ -124,13 +125,14 @@ def align(samples: np.ndarray, text: str, where: str) -> tuple[Phone, ...]:
 
 @lru_cache(maxsize=4)
 def _recorded(path: str, text: str, stamp: int, long: bool, where: str) -> Utterance:
-    audio = read_audio(Path(path), ALIGN_RATE, where)
-    seconds = len(audio) / ALIGN_RATE
+    from scipy.signal import resample_poly
+
+    sound = read_audio(Path(path), PLAYBACK_RATE, where)
+    seconds = len(sound) / PLAYBACK_RATE
     if seconds > LONG_RECORDING and not long:
         raise InputError(f"{where}: {path} lasts {seconds:.0f} s; expected at most {LONG_RECORDING:.0f} s "
                          "(--force-long, or long: true in a spec, for a longer one)")
-    phones = align(audio, text, where)
-    sound = read_audio(Path(path), PLAYBACK_RATE, where)
+    phones = align(resample_poly(sound, ALIGN_RATE, PLAYBACK_RATE).astype(np.float32), text, where)
     sound.flags.writeable = False
     return Utterance(sound, PLAYBACK_RATE, phones, text)
 
