@@ -62,6 +62,8 @@ class Terminated(BaseException):
 
 #: The signals received within :func:`handling_termination`, first first.
 _received: list[int] = []
+#: Within :func:`signals_deferred`: a signal is recorded, not raised.
+_deferred = False
 
 
 @contextmanager
@@ -76,7 +78,8 @@ def handling_termination():
 
     def raise_terminated(signum, _frame):
         _received.append(signum)
-        raise _exception_for(signum)
+        if not _deferred:
+            raise _exception_for(signum)
 
     unraisable = sys.unraisablehook
 
@@ -100,6 +103,20 @@ def handling_termination():
             signal.signal(signum, handler)
         sys.unraisablehook = unraisable
         _received.clear()
+
+
+@contextmanager
+def signals_deferred():
+    """Within the block a signal is only recorded; :func:`check_terminated` after it
+    raises it. For starting a child process that must then be closed: a SIGTERM raised
+    while ffmpeg was being started left the encoder running with no one to close it,
+    and it wrote its file after facesim had removed the temporary (CI)."""
+    global _deferred
+    outer, _deferred = _deferred, True
+    try:
+        yield
+    finally:
+        _deferred = outer
 
 
 def terminating_signal() -> int | None:

@@ -840,3 +840,38 @@ def test_a_signal_where_python_cannot_raise_is_not_printed_and_still_stops_the_w
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert result.stdout.split() == ["still", "working", "stopped"]
     assert "Exception ignored" not in result.stderr and "Traceback" not in result.stderr, result.stderr
+
+
+def test_a_signal_while_the_encoder_starts_leaves_no_file_behind(tmp_path, own_signal_handlers, monkeypatch):
+    """CI: a SIGTERM that arrived as the MP4's encoder (ffmpeg) was being started left it
+    running with no one to close it; it wrote its file after facesim had removed the
+    temporary, and a ``.a.partial-….mp4`` was left beside the spec."""
+    import gc
+
+    import imageio_ffmpeg
+
+    from facesim.export.output import write_frames
+
+    start = imageio_ffmpeg.write_frames
+
+    def signalled_as_it_starts(*args, **kwargs):
+        writer = start(*args, **kwargs)
+
+        class Starting:
+            def send(self, value):
+                sent = writer.send(value)
+                if value is None:  # ffmpeg has just been started
+                    os.kill(os.getpid(), signal.SIGTERM)
+                return sent
+
+            def close(self):
+                writer.close()
+
+        return Starting()
+
+    monkeypatch.setattr(imageio_ffmpeg, "write_frames", signalled_as_it_starts)
+    frames = np.zeros((3, 16, 16, 3), np.uint8)
+    with pytest.raises(Terminated):
+        write_frames(frames, tmp_path / "a.mp4", "mp4", 10.0)
+    gc.collect()  # an encoder left open is closed here, and writes its file
+    assert list(tmp_path.iterdir()) == []

@@ -26,7 +26,7 @@ from numpy.lib import format as npy
 
 from ..animation.simulate import Animation
 from ..errors import InputError
-from ..files import WriteError, atomic_path, check_destination, check_terminated
+from ..files import WriteError, atomic_path, check_destination, check_terminated, signals_deferred
 from ..renderer.scene import FaceRenderer, shared_renderer
 from ..renderer.settings import RenderSettings
 from ..timings import phase
@@ -232,15 +232,17 @@ def write_frames(frames, path: Path, kind: str, fps: float, replace: bool = True
             if audio is not None:
                 sound = tmp.with_name(tmp.name + ".wav")
                 write_wav(sound, *audio)
-            writer = imageio_ffmpeg.write_frames(
-                str(tmp), (width, height), fps=fps, codec="libx264", pix_fmt_out="yuv420p",
-                output_params=["-crf", "18", "-preset", "veryfast"] + (["-b:a", "128k"] if sound else []),
-                macro_block_size=1, audio_path=None if sound is None else str(sound),
-                audio_codec=None if sound is None else "aac",
-                ffmpeg_log_level="quiet",  # its failures are found by reading the file back
-            )
-            writer.send(None)
+            with signals_deferred():  # the encoder, once started, is always closed
+                writer = imageio_ffmpeg.write_frames(
+                    str(tmp), (width, height), fps=fps, codec="libx264", pix_fmt_out="yuv420p",
+                    output_params=["-crf", "18", "-preset", "veryfast"] + (["-b:a", "128k"] if sound else []),
+                    macro_block_size=1, audio_path=None if sound is None else str(sound),
+                    audio_codec=None if sound is None else "aac",
+                    ffmpeg_log_level="quiet",  # its failures are found by reading the file back
+                )
+                writer.send(None)
             try:
+                check_terminated()
                 for frame in itertools.chain([first], frames):
                     with phase("encoding"):
                         writer.send(np.ascontiguousarray(frame))
