@@ -20,6 +20,7 @@ time step. A spec is a YAML file validated by pydantic (unknown fields are error
     muscles: my_face.muscles.yaml
     face: me/                   # a face directory (facesim face from-photo): its identity, muscles, texture
     speech: {text: "Hello there", voice: en, rate: 175, start: 0.2}   # words said (facesim.speech)
+    fap: {open_jaw: 300, 12: [[0, 0], [0.5, 200]]}   # MPEG-4 FAPs in FAP units (facesim.animation.mpeg4), or a FAP file
 
 ``load_spec`` checks the file alone; ``activation_table`` checks the muscle names against
 the muscle file and turns the spec into a (frames, muscles) table once, before simulation.
@@ -42,6 +43,7 @@ from ..physics.muscles import TONGUE, MuscleSet
 from ..schema import Strict, load_model
 from ..speech import RATE, RATES, Utterance, recorded, speech_curves, synthesize
 from .arkit import is_shape_name, shape_facs
+from .mpeg4 import FILE_VALUES, FapDrive, fap_drive, fap_number, read_fap_file
 from .timeline import (
     AU_NAME,
     INTERPOLATIONS,
@@ -218,7 +220,27 @@ class Spec(Strict):
         "a head's identity (facesim.face.head): a seed for weights from the standard normal distribution, or the weights"))
     face: Path | None = Field(None, description="a face directory written by `facesim face from-photo`")
     speech: Speech | None = Field(None, description="words said: text, voice, rate, start (s)")
+    fap: dict[int, float | list] | Path | None = Field(None, description=(
+        "MPEG-4 FAPs by number or name: a value in FAP units, [[t, value], ...] keys, or an ASCII FAP file"))
     _source: Path | None = PrivateAttr(None)
+    _fap_stream: tuple | None = PrivateAttr(None)
+
+    @field_validator("fap", mode="before")
+    @classmethod
+    def _faps(cls, fap, info: ValidationInfo):
+        if fap is None:
+            return None
+        if isinstance(fap, (str, Path)):
+            directory = (info.context or {}).get("directory")
+            path = Path(fap)
+            return directory / path if directory is not None and not path.is_absolute() else path
+        if not isinstance(fap, dict):
+            raise ValueError("expected FAPs by number or name, or the path of a FAP file")
+        out = {}
+        for key, value in fap.items():
+            number = fap_number(key)
+            out[number] = _fap_value(number, value)
+        return out
 
     @field_validator("identity", mode="before")
     @classmethod
@@ -269,17 +291,54 @@ class Spec(Strict):
         return self
 
     @model_validator(mode="after")
-    def _real_time(self):
-        if self.speech is None:
+    def _fap_file(self):
+        if not isinstance(self.fap, Path):
             return self
+        fps, values = read_fap_file(self.fap, f"fap: {self.fap}")
+        self._fap_stream = (fps, values)
+        if "fps" not in self.model_fields_set:
+            object.__setattr__(self, "fps", fps)
+        if "frames" not in self.model_fields_set and not self.sequence:
+            frames = len(next(iter(values.values()))) if values else 1
+            object.__setattr__(self, "frames", min(math.ceil(frames * self.fps / fps), MAX_FRAMES))
+        return self
+
+    @model_validator(mode="after")
+    def _real_time(self):
+        if self.speech is None and self._fap_stream is None:
+            return self
+        what = "speech" if self.speech is not None else "a FAP file"
         if "dt" in self.model_fields_set and abs(self.dt * self.fps - 1.0) > 1e-6:
-            raise ValueError(f"dt ({self.dt}) and fps ({self.fps}) differ: a spec with speech plays in real time, "
+            raise ValueError(f"dt ({self.dt}) and fps ({self.fps}) differ: a spec with {what} plays in real time, "
                              "a frame every 1/fps s; leave dt out")
         object.__setattr__(self, "dt", 1.0 / self.fps)
-        if "frames" not in self.model_fields_set and not self.sequence:
+        if self.speech is not None and "frames" not in self.model_fields_set and not self.sequence:
             end = self.speech.start + self.speech.utterance.duration + SPEECH_TAIL
             object.__setattr__(self, "frames", min(math.ceil(end / self.dt), MAX_FRAMES))
         return self
+
+    def fap_values(self) -> dict[int, np.ndarray]:
+        """The spec's FAPs per frame, in FAP units: a FAP file's frames at this spec's
+        times (the nearest), inline values eased in over ``onset`` like ``aus``, inline
+        keys linearly between them."""
+        frames = self.frames
+        if self._fap_stream is not None:
+            fps, values = self._fap_stream
+            index = np.minimum(np.round(np.arange(frames) * self.dt * fps).astype(int), len(next(iter(values.values()))) - 1)
+            return {n: v[index] for n, v in values.items()}
+        out = {}
+        for number, value in (self.fap or {}).items():
+            if number in FILE_VALUES:
+                out[number] = np.tile(np.asarray(value + [0.0] * (FILE_VALUES[number] - len(value))), (frames, 1))
+            elif isinstance(value, list):
+                times, keyed = zip(*value)
+                out[number] = interpolate(times, keyed, np.arange(frames) * self.dt)
+            else:
+                out[number] = _ease(frames, self.onset) * value
+        return out
+
+    def fap_drive(self) -> FapDrive:
+        return fap_drive(self.fap_values())
 
     @model_validator(mode="after")
     def _one_head(self):
@@ -358,6 +417,31 @@ class Spec(Strict):
         raise InputError(f"{self.source}: {name!r} is neither a muscle, an action unit, nor an expression spec")
 
 
+def _fap_value(number: int, value):
+    """One inline FAP: a value in its units or [[t, value], ...] keys; FAP 1's
+    [viseme_select1, viseme_select2, viseme_blend], FAP 2's [expression_select1,
+    expression_intensity1, expression_select2, expression_intensity2] (the rest 0)."""
+    def finite(v):
+        return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+
+    if number in FILE_VALUES:
+        size = FILE_VALUES[number] - 1 if number == 1 else FILE_VALUES[number] - 2
+        if not (isinstance(value, list) and 1 <= len(value) <= size and all(finite(v) and 0 <= v <= 63 for v in value)):
+            what = "viseme_select1, viseme_select2, viseme_blend" if number == 1 else (
+                "expression_select1, expression_intensity1, expression_select2, expression_intensity2")
+            raise ValueError(f"FAP {number}: expected [{what}], numbers 0-63, got {value!r}")
+        return [float(v) for v in value]
+    if finite(value):
+        return float(value)
+    if isinstance(value, list) and value and all(isinstance(k, (list, tuple)) and len(k) == 2 and finite(k[0]) and finite(k[1])
+                                                 for k in value):
+        times = [float(k[0]) for k in value]
+        if any(b <= a for a, b in zip(times, times[1:])) or times[0] < 0:
+            raise ValueError(f"FAP {number}: key times must start at 0 or later and increase, got {times}")
+        return [(float(t), float(v)) for t, v in value]
+    raise ValueError(f"FAP {number}: expected a value in FAP units or [[t, value], ...] keys, got {value!r}")
+
+
 def library_spec(path: str | Path) -> Path:
     """``path`` itself, or, when no such file exists and it is a bare name (``happy``,
     ``surprise.yaml``), that spec of the library shipped with facesim."""
@@ -399,6 +483,9 @@ def pose_table(spec: Spec) -> np.ndarray:
     table = np.zeros((spec.frames, len(POSE)))
     for track in spec.pose:
         table[:, POSE.index(track.target)] += track.values(spec.dt, spec.frames)
+    if spec.fap:
+        for angle, curve in spec.fap_drive().pose.items():
+            table[:, POSE.index(angle)] += curve
     return table
 
 
@@ -496,6 +583,20 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
                 fail("speech", f"the visemes need the {control.replace('_', ' ')}, which this face's muscle file "
                      "does not have")
             table[:, [names.index(n) for n in both]] += curve[:, None]
+
+    if spec.fap:
+        drive = spec.fap_drive()
+        for control, curve in drive.controls.items():
+            where = f"fap -> {control}"
+            if AU_NAME.fullmatch(control):
+                table += np.outer(curve, au_vector(control, where))
+                continue
+            both = [n for n in names if n in (control, f"{control}_l", f"{control}_r")]
+            if not both:
+                muscle_vector(control, where)  # the error: which control this face lacks
+            table[:, [names.index(n) for n in both]] += curve[:, None]
+        for name, curve in drive.expressions.items():
+            table += np.outer(curve, expression_vector(name))
 
     for k, include in enumerate(spec.include):
         path = spec.resolve(include.spec)
