@@ -160,7 +160,7 @@ def test_a_broken_fap_file_is_one_line_naming_where(tmp_path, text, message):
     ({69: 10}, "FAP 69 does not exist"),
     ({"open_mouth": 10}, "'open_mouth' is not an MPEG-4 FAP number"),
     ({3: "wide"}, "FAP 3: expected a value in FAP units"),
-    ({3: [[0.5, 0], [0.2, 10]]}, "FAP 3: key times must start at 0 or later and increase"),
+    ({3: [[5, 0], [2, 10]]}, "FAP 3: key frames must start at 0 or later and increase"),
     ({1: [1, 2, 99]}, "FAP 1: expected [viseme_select1, viseme_select2, viseme_blend]"),
 ])
 def test_bad_inline_faps_are_one_line(tmp_path, fap, message):

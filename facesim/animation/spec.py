@@ -20,7 +20,7 @@ time step. A spec is a YAML file validated by pydantic (unknown fields are error
     muscles: my_face.muscles.yaml
     face: me/                   # a face directory (facesim face from-photo): its identity, muscles, texture
     speech: {text: "Hello there", voice: en, rate: 175, start: 0.2}   # words said (facesim.speech)
-    fap: {open_jaw: 300, 12: [[0, 0], [0.5, 200]]}   # MPEG-4 FAPs in FAP units (facesim.animation.mpeg4), or a FAP file
+    fap: {open_jaw: 300, 12: [[0, 0], [20, 200]]}   # MPEG-4 FAPs in FAP units (facesim.animation.mpeg4), or a FAP file
 
 ``load_spec`` checks the file alone; ``activation_table`` checks the muscle names against
 the muscle file and turns the spec into a (frames, muscles) table once, before simulation.
@@ -221,7 +221,7 @@ class Spec(Strict):
     face: Path | None = Field(None, description="a face directory written by `facesim face from-photo`")
     speech: Speech | None = Field(None, description="words said: text, voice, rate, start (s)")
     fap: dict[int, float | list] | Path | None = Field(None, description=(
-        "MPEG-4 FAPs by number or name: a value in FAP units, [[t, value], ...] keys, or an ASCII FAP file"))
+        "MPEG-4 FAPs by number or name: a value in FAP units, [[frame, value], ...] keys, or an ASCII FAP file"))
     _source: Path | None = PrivateAttr(None)
     _fap_stream: tuple | None = PrivateAttr(None)
 
@@ -320,7 +320,7 @@ class Spec(Strict):
     def fap_values(self) -> dict[int, np.ndarray]:
         """The spec's FAPs per frame, in FAP units: a FAP file's frames at this spec's
         times (the nearest), inline values eased in over ``onset`` like ``aus``, inline
-        keys linearly between them."""
+        keys ([frame, value], as a timeline's) linearly between them."""
         frames = self.frames
         if self._fap_stream is not None:
             fps, values = self._fap_stream
@@ -332,7 +332,7 @@ class Spec(Strict):
                 out[number] = np.tile(np.asarray(value + [0.0] * (FILE_VALUES[number] - len(value))), (frames, 1))
             elif isinstance(value, list):
                 times, keyed = zip(*value)
-                out[number] = interpolate(times, keyed, np.arange(frames) * self.dt)
+                out[number] = interpolate(times, keyed, np.arange(frames, dtype=float))
             else:
                 out[number] = _ease(frames, self.onset) * value
         return out
@@ -418,7 +418,7 @@ class Spec(Strict):
 
 
 def _fap_value(number: int, value):
-    """One inline FAP: a value in its units or [[t, value], ...] keys; FAP 1's
+    """One inline FAP: a value in its units or [[frame, value], ...] keys; FAP 1's
     [viseme_select1, viseme_select2, viseme_blend], FAP 2's [expression_select1,
     expression_intensity1, expression_select2, expression_intensity2] (the rest 0)."""
     def finite(v):
@@ -437,9 +437,9 @@ def _fap_value(number: int, value):
                                                  for k in value):
         times = [float(k[0]) for k in value]
         if any(b <= a for a, b in zip(times, times[1:])) or times[0] < 0:
-            raise ValueError(f"FAP {number}: key times must start at 0 or later and increase, got {times}")
+            raise ValueError(f"FAP {number}: key frames must start at 0 or later and increase, got {times}")
         return [(float(t), float(v)) for t, v in value]
-    raise ValueError(f"FAP {number}: expected a value in FAP units or [[t, value], ...] keys, got {value!r}")
+    raise ValueError(f"FAP {number}: expected a value in FAP units or [[frame, value], ...] keys, got {value!r}")
 
 
 def library_spec(path: str | Path) -> Path:
