@@ -766,6 +766,46 @@ def mesh_align(
                f"median {np.median(residual):.2f} cm, largest {residual.max():.2f} cm", err=True)
 
 
+@app.command()
+@handled
+def capture(
+    video: Path = typer.Argument(..., help="a face video (any format ffmpeg reads) or a directory of frames"),
+    output: Path = typer.Option(..., "-o", "--output", help="the performance to write: a spec (.yaml)"),
+    fps: Optional[float] = typer.Option(None, "--fps", help="frames per second (a video's own unless given; "
+                                        "a directory of frames: 25)"),
+    curves: Optional[Path] = typer.Option(None, "--curves", help="also write ARKit's 52 curves and the head's and "
+                                          "eyes' rotations, in Live Link Face's CSV layout"),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="also draw the main curves over time (.png)"),
+    force: bool = FORCE,
+):
+    """Capture a performance from a face video: MediaPipe's landmarks per frame, the
+    head's pose, the eyes' gaze and ARKit's shapes solved against facesim's own, written
+    as a spec that `facesim render` replays on any face. Needs facesim[photo]."""
+    from .capture.performance import capture as captured
+    from .capture.tracking import open_source
+    from .export.output import progress_bar
+
+    if fps is not None and not 0 < fps <= 240:
+        raise InputError(f"--fps: expected frames per second between 0 and 240, got {fps:g}")
+    outputs = [(output, "-o", (".yaml", ".yml")), (curves, "--curves", (".csv",)), (plot, "--plot", (".png",))]
+    for path, option, suffixes in outputs:
+        if path is not None and path.suffix.lower() not in suffixes:
+            raise InputError(f"{option}: {path}: expected a {' or '.join(suffixes)} file")
+    given = [p.resolve() for p, _, _ in outputs if p is not None]
+    if len(set(given)) < len(given):
+        raise InputError("-o, --curves and --plot must name different files")
+    for path, _, _ in outputs:
+        if path is not None:
+            check_destination(path, force)
+    source = open_source(video, fps)
+    with progress_bar(2 * source.frames, f"capturing {video.name}") as advance:
+        performance = captured(source, output, curves, plot, replace=force, notice=notice, progress=advance)
+    moving = int((performance.weights.max(axis=0) >= 0.03).sum())
+    written = ", ".join(str(p) for p in (output, curves, plot) if p is not None)
+    typer.echo(f"wrote {written}: {performance.frames} frames at {performance.fps:g} fps, {moving} shapes that move, "
+               f"head turned {np.abs(performance.head[:, 0]).max():.0f} degrees at most", err=True)
+
+
 @mesh_app.command("from-photo")
 @handled
 def mesh_from_photo_command(

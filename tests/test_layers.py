@@ -14,7 +14,7 @@ PACKAGE = Path(facesim.__file__).resolve().parent
 
 #: Lowest first. The base (configuration, errors, the cache, files, schemas, geometry,
 #: worker pools) is imported by all; each subpackage by the ones above it.
-LAYERS = ["base", "physics", "face", "speech", "animation", "renderer", "export", "app"]
+LAYERS = ["base", "physics", "face", "speech", "animation", "renderer", "export", "capture", "app"]
 BASE = {"config", "errors", "cache", "files", "schema", "geometry", "workers", "timings"}
 APP = {"cli", "batch", "dataset", "__main__", ""}
 #: The physics' Numba force terms: nothing outside the physics runs them.

@@ -1,0 +1,337 @@
+"""From tracked landmarks to a performance: the head's pose, the eyes' gaze and ARKit's
+shapes per frame, solved against facesim's own landmark motion.
+
+1. **Pose.** Each frame's landmarks (the face frame: x the subject's left, y up, z toward
+   the camera) are fitted by the similarity (Umeyama 1991) that best takes the head's
+   landmarks at rest onto them, on points that expressions barely move (the forehead, the
+   nose's bridge, the eyes' outer corners, the cheekbones, the face's sides). Its rotation
+   is the head's yaw, pitch and roll (facesim.geometry.rotation's order); taking it away
+   puts the frame's landmarks into the head's frame, in its centimetres.
+2. **The subject's own neutral.** The median of the first frames (``NEUTRAL_SECONDS``)
+   in the head's frame is the reference that expressions are measured from, so that a
+   face's shape, anyone's, is not read as an expression: the video should start neutral.
+3. **Smoothing without lag.** The landmarks in the head's frame are smoothed over time by
+   a Savitzky-Golay filter (a centred, zero-phase least-squares polynomial), which
+   removes the tracker's jitter and leaves peaks where they are.
+4. **Shapes.** Each frame's landmark motion is solved, by bounded least squares with a
+   small ridge (scipy's ``lsq_linear``, weights in [0, 1]), as a sum of ARKit's shapes'
+   landmark motion on facesim's head: the shapes baked by the physics
+   (facesim.animation.blendshapes), each at its full weight, read at MediaPipe's landmarks.
+5. **Gaze.** Each iris's centre, against where it is in the neutral frames, is an
+   eye's turn: asin(offset / the eyeball's radius), held through blinks.
+
+Frames with no face, or a face turned past ``TURN_LIMIT``, are bridged by straight lines
+from the frames around them (held at the ends), and reported.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..animation.arkit import ARKIT_52
+from ..errors import InputError
+from ..face.align import similarity
+from ..face.photo import image_to_face_frame
+from .tracking import IRIS_CENTRES, LANDMARKS, Tracked
+
+#: The seconds at the start taken as the subject's neutral face.
+NEUTRAL_SECONDS = 0.3
+#: A face turned further than this (degrees, yaw or pitch) is not solved: bridged.
+TURN_LIMIT = 40.0
+#: Landmarks the pose is fitted on (MediaPipe's indices): those ARKit's 52 shapes move
+#: least on the head, at most 1.2-2.3 mm each at full weight (the nose's bridge, the
+#: eyes' corners, the temples, the face's sides at the cheekbones), where the forehead
+#: moves 4 mm and the nose's tip 7.
+RIGID = (8, 168, 6, 133, 362, 243, 463, 244, 464, 127, 356, 162, 389, 34, 264, 139, 368, 33, 263, 130, 359, 234, 454)
+#: ARKit's shapes the landmarks are solved for: all but the eyes' looks (the irises give
+#: them) and tongueOut (a face mesh has no tongue).
+SOLVED = tuple(n for n in ARKIT_52 if not n.startswith("eyeLook") and n != "tongueOut")
+#: The ridge on the weights, in centimetres of landmark motion per unit weight: it keeps
+#: shapes that barely explain the motion at zero.
+RIDGE = 0.05
+#: Times the pose is fitted again on every landmark with the frame's shapes in the template.
+REFINEMENTS = 2
+#: How much less the side turned away counts: 1 - FAR_SIDE x (how far out) x sin(yaw).
+FAR_SIDE = 1.0
+
+#: Depth is MediaPipe's least certain coordinate: its residuals count this much.
+DEPTH_WEIGHT = 0.5
+#: The Savitzky-Golay filter's window (seconds) and polynomial order.
+SMOOTHING, ORDER = 0.2, 2
+
+
+@dataclass
+class Performance:
+    """A captured performance at ``fps``: ``weights`` (frames, len(SOLVED)) in [0, 1];
+    ``head`` (frames, 3) yaw, pitch, roll and ``gaze`` (frames, 2, 2) each eye's yaw and
+    pitch in degrees (facesim.animation.spec.POSE: the subject's left eye first); the
+    frames bridged, and why."""
+
+    fps: float
+    weights: np.ndarray
+    head: np.ndarray
+    gaze: np.ndarray
+    missing: list[int] = field(default_factory=list)
+    turned: list[int] = field(default_factory=list)
+    names: tuple[str, ...] = SOLVED
+
+    @property
+    def frames(self) -> int:
+        return len(self.weights)
+
+    def arkit_weights(self) -> np.ndarray:
+        """(frames, 52): the weights in ARKit's order, the eyes' looks from the gaze."""
+        out = np.zeros((self.frames, len(ARKIT_52)))
+        for k, name in enumerate(self.names):
+            out[:, ARKIT_52.index(name)] = self.weights[:, k]
+        return out
+
+
+@dataclass(frozen=True)
+class Basis:
+    """The head at rest at MediaPipe's landmarks (468, 3) cm (the template the pose is
+    fitted to), each solved shape's landmark motion at its full weight (S, 470, 3: the
+    468 and the irises' centres, in the head's frame, cm), the eyeballs' radius (cm)."""
+
+    rest: np.ndarray
+    motion: np.ndarray
+    eye_radius: float
+    turns: dict[str, np.ndarray] = field(default_factory=dict)  # TURNS' tables, GRID's residuals
+
+    def turned(self, raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For the ``raw`` (frames, 3) angles a fit found: the head's true angles, and
+        what MediaPipe's landmarks of a head so turned wrongly move by in the head's frame
+        (frames, 470, 3), measured on the neutral head turned by known angles (``TURNS``)
+        and interpolated, the yaw's and the pitch's added."""
+        angles, moved = raw.copy(), np.zeros((len(raw), *self.motion.shape[1:]))
+        for axis, name in enumerate(("yaw", "pitch")):
+            order = np.argsort(self.turns[f"{name}_seen"])
+            seen, true, table = (self.turns[f"{name}_{part}"][order] for part in ("seen", "true", "moved"))
+            angles[:, axis] = np.interp(raw[:, axis], seen, true)
+            j = np.clip(np.searchsorted(seen, raw[:, axis]) - 1, 0, len(seen) - 2)
+            f = np.clip((raw[:, axis] - seen[j]) / (seen[j + 1] - seen[j]), 0.0, 1.0)[:, None, None]
+            moved += (1 - f) * table[j] + f * table[j + 1]
+        return angles, moved
+
+    def image_residual(self, yaw: float, pitch: float) -> np.ndarray:
+        """(468, 2) ``_image_residual`` of the neutral head at this true yaw and pitch,
+        bilinear in GRID (held at its edges)."""
+        out = 0.0
+        (ya, yb, fy), (pa, pb, fp) = (_between(GRID[n], v) for n, v in (("yaw", yaw), ("pitch", pitch)))
+        table = self.turns["grid_residual"]
+        for j, wy in ((ya, 1 - fy), (yb, fy)):
+            for i, wp in ((pa, 1 - fp), (pb, fp)):
+                out = out + wy * wp * table[j, i]
+        return out
+
+
+def _between(grid: np.ndarray, value: float) -> tuple[int, int, float]:
+    j = int(np.clip(np.searchsorted(grid, value) - 1, 0, len(grid) - 2))
+    return j, j + 1, float(np.clip((value - grid[j]) / (grid[j + 1] - grid[j]), 0.0, 1.0))
+
+
+#: The renders the basis is measured on: their size, and the frames each shape is held.
+BASIS_SIZE, BASIS_FRAMES = 384, 30
+#: The weights each shape is held at: its motion per unit weight is the least-squares
+#: slope through them (and rest). A muscle's response flattens toward its full weight,
+#: and MediaPipe follows a closing lid only past half way: either weight alone misreads
+#: the other's shapes.
+BASIS_WEIGHTS = (0.5, 1.0)
+#: The neutral head turned by these angles (degrees) measures how MediaPipe's landmarks
+#: of a turned face differ from the turned landmarks of the face: the side turned away is
+#: partly hidden, and the tracker's fit bends it.
+TURNS = {"yaw": np.arange(-45.0, 46.0, 7.5), "pitch": np.arange(-30.0, 31.0, 7.5)}
+#: The neutral head turned by each yaw and pitch of this grid measures where MediaPipe's
+#: landmarks of a turned face lie in the image against the turned and projected neutral
+#: (``_image_residual``): the yaw's and the pitch's artifacts do not add.
+GRID = {"yaw": np.arange(-40.0, 41.0, 10.0), "pitch": np.arange(-30.0, 31.0, 10.0)}
+
+
+def _image_residual(points: np.ndarray, neutral: np.ndarray) -> np.ndarray:
+    """(468, 2): a face's landmarks in the image less ``neutral`` turned, scaled and
+    placed by the similarity fitted to them on every landmark, in the neutral's units."""
+    fitted = list(range(LANDMARKS))
+    scale, rotation, translation = similarity(neutral[fitted], points[fitted])
+    return (points[:LANDMARKS, :2] - (scale * neutral[:LANDMARKS] @ rotation.T + translation)[:, :2]) / scale
+
+
+def head_basis(spec) -> Basis:
+    """ARKit's shapes' landmark motion on ``spec``'s head as MediaPipe sees it: each shape
+    held at full weight by the physics, rendered from the front, its landmarks found and
+    put into the head's frame as a video's are (``canonical``), less the neutral render's.
+    Measured once and kept in facesim's cache (facesim.cache) by the code and the head."""
+    from .. import cache
+    from ..animation.simulate import model_for
+    from ..config import VERSION
+
+    model = model_for(spec)
+    head = model.mesh.head
+    rest = np.einsum("kj,kjd->kd", head.landmark_weight, head.vertices[head.landmark_vertex])
+    parts = [Path(__file__).read_bytes(), VERSION.encode(), model.rest_position.tobytes(), spec.muscles_path.read_bytes(),
+             spec.material.model_dump_json().encode(), " ".join(SOLVED).encode()]
+    stored = cache.cached_arrays("capture-basis", cache.key(*parts), lambda: _rendered_motion(spec, rest), keep=2)
+    return Basis(rest, stored["motion"], head.eyeball("left")[1], {k: v for k, v in stored.items() if k != "motion"})
+
+
+def _rendered_motion(spec, rest: np.ndarray) -> dict[str, np.ndarray]:
+    from ..animation.simulate import simulate
+    from ..renderer.scene import FaceRenderer
+    from ..renderer.settings import RenderSettings
+    from .tracking import face_tracker
+
+    settings = RenderSettings(width=BASIS_SIZE, height=BASIS_SIZE)
+    renderer = None
+
+    def seen(animation, pose=None) -> np.ndarray:
+        image = renderer.frame(animation, BASIS_FRAMES - 1, pose=pose)
+        with face_tracker(still=True) as faces_in:
+            faces = faces_in(image)
+        if not faces:
+            raise RuntimeError("MediaPipe found no face in facesim's render of its own head")
+        return image_to_face_frame(faces[0])
+
+    def held(name: str, weight: float = 1.0):
+        return simulate(spec.with_overrides(frames=BASIS_FRAMES, arkit={name: weight} if name else {}, timeline=[],
+                                            pose=[], name="basis"))
+
+    try:
+        neutral = held("")
+        renderer = FaceRenderer.of(neutral, settings)
+        points = seen(neutral)
+        # every render of the still head is put into the head's frame by the neutral's fit:
+        # a shape that moves a fitted point (the brows the bridge) must not turn its motion
+        scale, rotation, translation = similarity(rest[list(RIGID)], points[list(RIGID)])
+
+        def in_head_frame(points):
+            kept = np.concatenate([points[:LANDMARKS], points[list(IRIS_CENTRES)]])
+            return (kept - translation) @ rotation / scale
+
+        at_rest = in_head_frame(points)
+        # the slope through rest of each shape's motion at BASIS_WEIGHTS, by least squares
+        levels = np.asarray(BASIS_WEIGHTS)
+        out = {"motion": np.stack([sum(w * (in_head_frame(seen(held(name, w))) - at_rest) for w in levels)
+                                   / (levels**2).sum() for name in SOLVED])}
+        for axis, name in enumerate(("yaw", "pitch")):
+            found = []
+            for angle in TURNS[name]:
+                pose = np.zeros(5)
+                pose[axis] = angle
+                found.append(canonical(seen(neutral, pose), at_rest, range(LANDMARKS)))
+            out[f"{name}_true"] = np.asarray(TURNS[name])
+            out[f"{name}_seen"] = np.array([angles[axis] for angles, _ in found])
+            out[f"{name}_moved"] = np.stack([faces - at_rest for _, faces in found])
+        out["grid_residual"] = np.stack([[_image_residual(seen(neutral, np.array([yaw, pitch, 0.0, 0.0, 0.0])), at_rest)
+                                          for pitch in GRID["pitch"]] for yaw in GRID["yaw"]])
+        return out
+    finally:
+        if renderer is not None:
+            renderer.close()
+
+
+def canonical(points: np.ndarray, template: np.ndarray, fitted=RIGID) -> tuple[np.ndarray, np.ndarray]:
+    """A face's (478, 3) landmarks in the face frame (facesim.face.photo.image_to_face_frame)
+    into the head's frame: the yaw, pitch and roll (degrees) of the similarity that best
+    takes ``template`` onto them at the ``fitted`` landmarks, and the 468 landmarks and the
+    irises' centres (470, 3) with it undone (cm)."""
+    rigid = list(fitted)
+    scale, rotation, translation = similarity(template[rigid], points[rigid])
+    kept = np.concatenate([points[:LANDMARKS], points[list(IRIS_CENTRES)]])
+    return yaw_pitch_roll(rotation), (kept - translation) @ rotation / scale
+
+
+def yaw_pitch_roll(rotation: np.ndarray) -> np.ndarray:
+    """The angles (degrees) of facesim.geometry.rotation(yaw, pitch, roll) = R."""
+    pitch = math.asin(float(np.clip(rotation[1, 2], -1.0, 1.0)))
+    return np.degrees([math.atan2(rotation[0, 2], rotation[2, 2]), pitch, math.atan2(-rotation[1, 0], rotation[1, 1])])
+
+
+def bridged(values: np.ndarray, good: np.ndarray) -> np.ndarray:
+    """``values`` (frames, ...) with the frames not ``good`` replaced by straight lines
+    between the good ones around them (held before the first and after the last)."""
+    frames = np.arange(len(values))
+    flat = values.reshape(len(values), -1)
+    out = np.stack([np.interp(frames, frames[good], column[good]) for column in flat.T], axis=1)
+    return out.reshape(values.shape)
+
+
+def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None) -> Performance:
+    """The performance in ``tracked`` (see the module's steps)."""
+    from scipy.signal import savgol_filter
+
+    frames = len(tracked.landmarks)
+    found = np.array([lm is not None for lm in tracked.landmarks])
+    if not found.any():
+        raise InputError(f"{source}: no face found in any of its {frames} frames")
+    points = [None if lm is None else image_to_face_frame(np.asarray(lm, dtype=np.float64)) for lm in tracked.landmarks]
+    raw, faces = np.zeros((frames, 3)), np.zeros((frames, LANDMARKS + 2, 3))
+    for k in np.flatnonzero(found):
+        raw[k], faces[k] = canonical(points[k], basis.rest, RIGID)
+    first = np.flatnonzero(found)[:max(1, int(round(NEUTRAL_SECONDS * fps)))]
+    raw -= np.median(raw[first], axis=0)  # the turns from how the head faced the camera at first
+    turned = found & (np.abs(raw[:, :2]).max(axis=1) > TURN_LIMIT)
+    good = found & ~turned
+    if not good.any():
+        raise InputError(f"{source}: the face is turned more than {TURN_LIMIT:.0f} degrees in every frame it is found in")
+    first = np.flatnonzero(good)[:max(1, int(round(NEUTRAL_SECONDS * fps)))]
+    neutral = np.median(faces[first], axis=0)
+    weights = np.zeros((frames, len(SOLVED)))
+    for k in np.flatnonzero(good):
+        raw[k], faces[k] = canonical(points[k], neutral, RIGID)
+        weights[k] = _shapes_in_the_image(points[k], neutral, np.zeros(len(SOLVED)), raw[k], basis, RIGID)
+        for _ in range(REFINEMENTS):  # the pose again, on every landmark, the shapes' motion in the template
+            weights[k] = _shapes_in_the_image(points[k], neutral, weights[k], raw[k], basis, range(LANDMARKS))
+        if progress:
+            progress(1)
+    weights, raw, faces = bridged(weights, good), bridged(raw, good), bridged(faces, good)
+    head, _ = basis.turned(raw)
+    window = max(ORDER + 1, int(round(SMOOTHING * fps)) | 1)
+    if frames > window:
+        weights = np.clip(savgol_filter(weights, window, ORDER, axis=0), 0.0, 1.0)
+        head, faces = savgol_filter(head, window, ORDER, axis=0), savgol_filter(faces, window, ORDER, axis=0)
+    weights[weights < 0.01] = 0.0
+    gaze = _gaze(faces[:, LANDMARKS:] - neutral[LANDMARKS:], neutral, basis, weights)
+    return Performance(fps, weights, head, gaze, missing=np.flatnonzero(~found).tolist(),
+                       turned=np.flatnonzero(turned).tolist())
+
+
+def _shapes_in_the_image(points: np.ndarray, neutral: np.ndarray, weights: np.ndarray, raw: np.ndarray, basis: Basis,
+                         fitted) -> np.ndarray:
+    """One frame's shapes, solved where MediaPipe is surest, in the image: the head fitted
+    at the ``fitted`` landmarks to the subject's neutral moved by ``weights``, the shapes'
+    motion turned and scaled by that fit, what MediaPipe's landmarks of a head so turned
+    are off by (``Basis.image_residual``) allowed for, and the landmarks' image positions
+    (x, y) solved by bounded least squares with a ridge. A turned face's hidden side,
+    whose depth MediaPipe guesses, counts only as far as it shows."""
+    from scipy.optimize import lsq_linear
+
+    fitted = list(fitted)
+    template = neutral[:LANDMARKS] + np.tensordot(weights, basis.motion[:, :LANDMARKS], axes=1)
+    scale, rotation, translation = similarity(template[fitted], points[fitted])
+    true, _ = basis.turned(raw[None])
+    start = scale * neutral[:LANDMARKS] @ rotation.T + translation
+    start[:, :2] += scale * basis.image_residual(true[0, 0], true[0, 1])
+    # the side of the face turned away counts less, the more so the further out and the more turned
+    away = np.clip(np.sign(rotation[0, 2]) * neutral[:LANDMARKS, 0] / np.abs(neutral[:LANDMARKS, 0]).max(), 0.0, 1.0)
+    counts = np.clip(1.0 - FAR_SIDE * away * abs(rotation[0, 2]), 0.1, 1.0)[:, None]
+    design = ((scale * basis.motion[:, :LANDMARKS] @ rotation.T)[:, :, :2] * counts).reshape(len(SOLVED), -1).T
+    design = np.vstack([design, scale * RIDGE * np.eye(len(SOLVED))])
+    target = np.concatenate([((points[:LANDMARKS, :2] - start[:, :2]) * counts).ravel(), np.zeros(len(SOLVED))])
+    return lsq_linear(design, target, bounds=(0.0, 1.0), method="bvls").x
+
+
+def _gaze(iris_moved: np.ndarray, neutral: np.ndarray, basis: Basis, weights: np.ndarray) -> np.ndarray:
+    """(frames, 2, 2): each eye's yaw and pitch from its iris's offset, the subject's left
+    eye first; held where the eye is more than half closed."""
+    left_first = [0, 1] if neutral[LANDMARKS, 0] > neutral[LANDMARKS + 1, 0] else [1, 0]
+    offset = iris_moved[:, left_first, :2]
+    angles = np.degrees(np.arcsin(np.clip(offset / basis.eye_radius, -1.0, 1.0)))
+    blinks = [weights[:, SOLVED.index(n)] for n in ("eyeBlinkLeft", "eyeBlinkRight")]
+    for eye, blink in enumerate(blinks):
+        open_ = blink < 0.5
+        if open_.any() and not open_.all():
+            angles[:, eye] = bridged(angles[:, eye], open_)
+    return angles

@@ -1,0 +1,186 @@
+"""Performance capture (issue 49): a face video read back into ARKit's shapes, the head's
+pose and the gaze (facesim.capture), checked by round trips: known curves rendered by
+facesim, captured, and compared with the curves that made them."""
+
+import subprocess
+import sys
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+import facesim
+from facesim.animation.spec import Spec, load_spec, pose_table
+from facesim.capture.performance import capture
+from facesim.capture.solver import SOLVED
+from facesim.renderer.settings import RenderSettings
+
+pytest.importorskip("mediapipe")
+
+FPS = 25
+#: The round trip's curves: smooth and sparse, two jaw openings, two blinks, a smile, the
+#: inner brows, and the head turned 25 degrees to each side while it nods.
+PERFORMANCE = {
+    "frames": 100, "fps": FPS, "dt": 1 / FPS,
+    "timeline": [
+        {"target": "jawOpen", "interpolation": "cosine", "keys": [[0, 0], [10, 0], [22, 0.6], [34, 0], [70, 0], [80, 0.4], [90, 0]]},
+        {"target": "eyeBlinkLeft", "interpolation": "cosine", "keys": [[0, 0], [40, 0], [43, 1], [46, 0], [75, 0], [78, 1], [81, 0]]},
+        {"target": "eyeBlinkRight", "interpolation": "cosine", "keys": [[0, 0], [40, 0], [43, 1], [46, 0], [75, 0], [78, 1], [81, 0]]},
+        {"target": "mouthSmileLeft", "interpolation": "cosine", "keys": [[0, 0], [30, 0], [50, 0.8], [65, 0.8], [80, 0]]},
+        {"target": "mouthSmileRight", "interpolation": "cosine", "keys": [[0, 0], [30, 0], [50, 0.8], [65, 0.8], [80, 0]]},
+        {"target": "browInnerUp", "interpolation": "cosine", "keys": [[0, 0], [55, 0], [65, 0.7], [85, 0]]},
+    ],
+    "pose": [
+        {"target": "head_yaw", "interpolation": "cosine", "keys": [[0, 0], [15, 0], [40, 25], [60, -20], [85, 0]]},
+        {"target": "head_pitch", "interpolation": "cosine", "keys": [[0, 0], [20, 0], [50, -10], [90, 5]]},
+    ],
+}
+#: The controls each must be captured with a Pearson correlation of at least 0.9.
+MAIN = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "mouthSmileLeft", "mouthSmileRight")
+
+
+def rendered(tmp_path, name: str, **changes) -> tuple[Spec, object]:
+    spec = Spec.model_validate({"name": name, **PERFORMANCE, **changes})
+    path = tmp_path / f"{name}.mp4"
+    facesim.render(facesim.simulate(spec), path, RenderSettings(width=320, height=320))
+    return spec, path
+
+
+def agreement(spec, performance) -> dict:
+    """Per control that moves: the Pearson correlation of the captured curve with the
+    true one, and the lag (frames) at which their cross-correlation peaks."""
+    out = {}
+    for track in spec.timeline:
+        true = track.values(spec.dt, spec.frames)
+        got = performance.weights[:, SOLVED.index(track.target)]
+        lags = np.correlate(got - got.mean(), true - true.mean(), "full")
+        out[track.target] = (float(np.corrcoef(true, got)[0, 1]), int(np.argmax(lags)) - (spec.frames - 1))
+    return out
+
+
+@pytest.fixture(scope="module")
+def round_trip(tmp_path_factory):
+    root = tmp_path_factory.mktemp("capture")
+    spec, video = rendered(root, "performance")
+    performance = capture(video, root / "performance.yaml", curves=root / "performance.csv", plot=root / "performance.png")
+    return spec, video, performance, root
+
+
+def check_round_trip(spec, performance):
+    """The issue's bar: a Pearson correlation of at least 0.85 averaged over the controls
+    that move, 0.9 for the jaw, the blinks and the smiles; the head within 3 degrees."""
+    correlations = {name: round(r, 3) for name, (r, _) in agreement(spec, performance).items()}
+    assert np.mean(list(correlations.values())) >= 0.85, correlations
+    assert all(correlations[name] >= 0.9 for name in MAIN), correlations
+    truth = pose_table(spec)[:, :3]
+    assert np.abs(performance.head - truth).max() <= 3.0, np.abs(performance.head - truth).max(axis=0)
+
+
+def test_a_performance_rendered_by_facesim_is_captured_back(round_trip):
+    spec, _, performance, _ = round_trip
+    check_round_trip(spec, performance)
+    lags = {name: lag for name, (_, lag) in agreement(spec, performance).items()}
+    assert all(abs(lags[name]) <= 3 for name in MAIN), lags
+
+
+@pytest.mark.xfail(strict=True, reason="the left smile rises 3 frames early while the head turns its left side away "
+                   "(MediaPipe's far side, docs/capture.md)")
+def test_the_captured_curves_peak_with_the_true_ones(round_trip):
+    spec, _, performance, _ = round_trip
+    lags = {name: lag for name, (_, lag) in agreement(spec, performance).items()}
+    assert all(lags[name] == 0 for name in MAIN), lags
+
+
+def test_the_capture_is_a_spec_that_replays_on_another_face_and_curves_in_live_link_layout(round_trip):
+    from facesim.export.rig import LIVE_LINK_COLUMNS
+
+    spec, _, performance, root = round_trip
+    written = load_spec(root / "performance.yaml")
+    assert (written.frames, written.fps) == (spec.frames, FPS) and abs(written.dt - 1 / FPS) < 1e-9
+    replay = facesim.simulate(written.with_overrides(identity=7))
+    jaw = replay.activations[:, replay.muscle_names.index("jaw")]
+    true_jaw = next(t for t in spec.timeline if t.target == "jawOpen").values(spec.dt, spec.frames)
+    assert np.corrcoef(jaw, true_jaw)[0, 1] > 0.9  # the replay opens the jaw when the source did
+    assert np.abs(pose_table(written)[:, 0] - performance.head[:, 0]).max() < 0.5  # the head turns, key-framed
+    rows = (root / "performance.csv").read_text().splitlines()
+    assert tuple(rows[0].split(",")) == LIVE_LINK_COLUMNS and len(rows) == spec.frames + 1
+    column = LIVE_LINK_COLUMNS.index("JawOpen")
+    assert np.corrcoef([float(r.split(",")[column]) for r in rows[1:]], true_jaw)[0, 1] > 0.9
+    assert iio.imread(root / "performance.png").shape[2] in (3, 4)
+
+
+@pytest.fixture(scope="module")
+def held_out(tmp_path_factory):
+    """A face the solver was not built on (its shapes are the default head's)."""
+    root = tmp_path_factory.mktemp("identity")
+    spec, video = rendered(root, "identity7", identity=7)
+    return spec, capture(video, root / "identity7.yaml")
+
+
+def test_a_held_out_identity_is_captured_back_within_the_looser_bar(held_out):
+    spec, performance = held_out
+    correlations = {name: round(r, 3) for name, (r, _) in agreement(spec, performance).items()}
+    assert np.mean(list(correlations.values())) >= 0.8 and all(correlations[n] >= 0.85 for n in MAIN), correlations
+    assert np.abs(performance.head - pose_table(spec)[:, :3]).max() <= 3.0
+
+
+@pytest.mark.xfail(strict=True, reason="identity 7's blinks come back at 0.88 and 0.87 (its lids are not the default "
+                   "head's, on which the shapes were measured: docs/capture.md)")
+def test_a_held_out_identity_is_captured_back(held_out):
+    check_round_trip(*held_out)
+
+
+def test_frames_without_a_face_are_bridged_and_said(round_trip, tmp_path):
+    spec, video, _, _ = round_trip
+    frames = iio.imread(video)
+    frames[60:64] = 235  # four blank frames mid-smile
+    gappy = tmp_path / "gappy.mp4"
+    iio.imwrite(gappy, frames, fps=FPS, codec="libx264", macro_block_size=1)
+    said = []
+    performance = capture(gappy, tmp_path / "gappy.yaml", notice=said.append)
+    assert performance.missing == [60, 61, 62, 63]
+    assert any("no face found in 4 frames (60-63)" in s and "bridged" in s for s in said), said
+    smile = performance.weights[:, SOLVED.index("mouthSmileLeft")]
+    assert smile[60:64].min() > 0.5 * smile[55:70].max()  # held across the gap, not dropped to neutral
+
+
+def test_the_largest_of_several_faces_is_followed_and_said(round_trip, tmp_path):
+    spec, video, _, _ = round_trip
+    frames = iio.imread(video)[:40]
+    small = frames[:, ::2, ::2]
+    pair = np.full((40, 320, 480, 3), 235, np.uint8)
+    pair[:, :, :320] = frames
+    pair[:, 80:240, 320:] = small
+    two = tmp_path / "two.mp4"
+    iio.imwrite(two, pair, fps=FPS, codec="libx264", macro_block_size=1)
+    said = []
+    performance = capture(two, tmp_path / "two.yaml", notice=said.append)
+    assert sum("more than one face" in s for s in said) == 1
+    true_jaw = next(t for t in spec.timeline if t.target == "jawOpen").values(spec.dt, spec.frames)[:40]
+    assert np.corrcoef(performance.weights[:, SOLVED.index("jawOpen")], true_jaw)[0, 1] > 0.9
+
+
+def facesim_command(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "facesim", *args], cwd=cwd, capture_output=True, text=True)
+
+
+def test_bad_videos_are_one_line_and_nothing_written(tmp_path):
+    blank = tmp_path / "blank.mp4"
+    iio.imwrite(blank, np.full((10, 64, 64, 3), 200, np.uint8), fps=FPS, codec="libx264", macro_block_size=1)
+    (tmp_path / "notes.mp4").write_text("not a video")
+    (tmp_path / "frames").mkdir()
+    cases = [
+        (["blank.mp4", "-o", "a.yaml"], "blank.mp4: no face found in any of its 10 frames"),
+        (["notes.mp4", "-o", "a.yaml"], "notes.mp4: not a video ffmpeg can read"),
+        (["missing.mp4", "-o", "a.yaml"], "missing.mp4: no such video or directory of frames"),
+        (["frames", "-o", "a.yaml"], "frames: a directory with no frames in it"),
+        (["blank.mp4", "-o", "a.txt"], "-o: a.txt: expected a .yaml or .yml file"),
+        (["blank.mp4", "-o", "a.yaml", "--curves", "a.yaml"], "--curves: a.yaml: expected a .csv file"),
+        (["blank.mp4", "-o", "a.yaml", "--fps", "0"], "--fps: expected frames per second between 0 and 240"),
+    ]
+    before = sorted(p.name for p in tmp_path.iterdir())
+    for args, message in cases:
+        result = facesim_command("capture", *args, cwd=tmp_path)
+        assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr, (args, result.stderr)
+        assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
