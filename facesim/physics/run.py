@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import SimulationError
 from . import layout, rig_control, solver, twins
+from .material import steps_per_frame
 from .model import Model
 from .muscle_forces import _muscle_forces
 
@@ -134,8 +135,9 @@ def run(
     table = np.ascontiguousarray(activations, dtype=np.float64)
     control = rig_control.control(model.arrays, np.zeros(table.shape[1]))
     work, forces = layout.workspace(model.arrays), layout.forces(model.arrays)
-    factor = model.preconditioner(float(dt) / model.material.substeps)
-    piece = 1 if ring else STREAMED_FRAMES if progress else max(1, int(STEPS_PER_CALL / (model.material.substeps * n)))
+    substeps = steps_per_frame(model.material, float(dt))
+    factor = model.preconditioner(float(dt) / substeps)
+    piece = 1 if ring else STREAMED_FRAMES if progress else max(1, int(STEPS_PER_CALL / (substeps * n)))
     scratch = None if model.vertex_order is None else np.empty((min(piece, frames), n, 3))  # the kernels' order
     status, frame, element = layout.OK, -1, -1
     started = time.perf_counter()
@@ -154,7 +156,7 @@ def run(
             first = start % len(out.positions) if ring else start
             rows = out.positions[first:first + stop - start]
             status, frame, element = simulate(
-                model.arrays, table, start, stop, float(dt), int(model.material.substeps), energy_limit,
+                model.arrays, table, start, stop, float(dt), substeps, energy_limit,
                 stop_on_inversion, state, control, work, forces, factor,
                 out._replace(positions=rows if scratch is None else scratch[:stop - start]),
             )
