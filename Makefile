@@ -96,6 +96,7 @@ docs: test-packages $(VENV)/.photo tests/js/node_modules/.installed
 	$(BIN)/python scripts/export_docs.py
 	# a face that talks: docs/speech.mp4 (with its sound) and docs/speech.png (docs/speech.md)
 	$(BIN)/python scripts/speech_docs.py
+	$(BIN)/python scripts/capture_docs.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache tests/js/node_modules

@@ -1,6 +1,6 @@
 """Every command in the README runs as written: each shell line of its ``sh`` blocks that
 starts with ``facesim`` and needs no photo of the user's (``me.jpg``, a face directory
-made from it, a scan) runs in a fresh directory beside the expression library and the
+made from it, a scan, a video ``me.mp4``) runs in a fresh directory beside the expression library and the
 faces, at a small frame size and with few dataset samples so the suite stays quick, and
 exits 0 with its output written. The docs the README links to exist."""
 
@@ -15,7 +15,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text()
 #: What the user brings: a command that names one of these is left to the face tests.
-NEEDS_A_PHOTO = ("me.jpg", "me/", "me.obj", "scan.")
+NEEDS_A_PHOTO = ("me.jpg", "me/", "me.obj", "scan.", "me.mp4")
 SIZED = ("render", "say", "batch", "sheet", "dataset")
 
 
