@@ -43,12 +43,13 @@ def row(name: str, spec, performance) -> str:
 
 
 def main() -> int:
+    from skimage import data
+
     import facesim
     from facesim.animation.spec import load_spec
     from facesim.capture.performance import capture
     from facesim.face.own_face import face_from_photo
     from facesim.renderer.settings import RenderSettings
-    from skimage import data
 
     OUT.mkdir(parents=True, exist_ok=True)
     spec = load_spec(ROOT / "expressions" / "performance.yaml")

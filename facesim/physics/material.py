@@ -9,7 +9,6 @@ Plain numbers: what a file may say and how it is checked is facesim.face.materia
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass, replace
 from typing import Literal
 
