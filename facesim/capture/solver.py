@@ -266,10 +266,13 @@ def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None
     found = np.array([lm is not None for lm in tracked.landmarks])
     if not found.any():
         raise InputError(f"{source}: no face found in any of its {frames} frames")
-    points = [None if lm is None else image_to_face_frame(np.asarray(lm, dtype=np.float64)) for lm in tracked.landmarks]
-    raw, faces = np.zeros((frames, 3)), np.zeros((frames, LANDMARKS + 2, 3))
+
+    def points(k: int) -> np.ndarray:
+        return image_to_face_frame(np.asarray(tracked.landmarks[k], dtype=np.float64))
+
+    raw, faces = np.zeros((frames, 3)), np.zeros((frames, LANDMARKS + 2, 3), dtype=np.float32)
     for k in np.flatnonzero(found):
-        raw[k], faces[k] = canonical(points[k], basis.rest, RIGID)
+        raw[k], faces[k] = canonical(points(k), basis.rest, RIGID)
     first = np.flatnonzero(found)[:max(1, int(round(NEUTRAL_SECONDS * fps)))]
     raw -= np.median(raw[first], axis=0)  # the turns from how the head faced the camera at first
     turned = found & (np.abs(raw[:, :2]).max(axis=1) > TURN_LIMIT)
@@ -277,13 +280,14 @@ def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None
     if not good.any():
         raise InputError(f"{source}: the face is turned more than {TURN_LIMIT:.0f} degrees in every frame it is found in")
     first = np.flatnonzero(good)[:max(1, int(round(NEUTRAL_SECONDS * fps)))]
-    neutral = np.median(faces[first], axis=0)
+    neutral = np.median(faces[first], axis=0).astype(np.float64)
     weights = np.zeros((frames, len(SOLVED)))
     for k in np.flatnonzero(good):
-        raw[k], faces[k] = canonical(points[k], neutral, RIGID)
-        weights[k] = _shapes_in_the_image(points[k], neutral, np.zeros(len(SOLVED)), raw[k], basis, RIGID)
+        seen = points(k)
+        raw[k], faces[k] = canonical(seen, neutral, RIGID)
+        weights[k] = _shapes_in_the_image(seen, neutral, np.zeros(len(SOLVED)), raw[k], basis, RIGID)
         for _ in range(REFINEMENTS):  # the pose again, on every landmark, the shapes' motion in the template
-            weights[k] = _shapes_in_the_image(points[k], neutral, weights[k], raw[k], basis, range(LANDMARKS))
+            weights[k] = _shapes_in_the_image(seen, neutral, weights[k], raw[k], basis, range(LANDMARKS))
         if progress:
             progress(1)
     weights, raw, faces = bridged(weights, good), bridged(raw, good), bridged(faces, good)
