@@ -211,8 +211,6 @@ def test_mediapipe_sees_the_lips_close_at_every_bilabial_of_the_rendered_mp4(sen
     assert all(g < 0.15 for _, g in closed), closed
 
 
-@pytest.mark.xfail(strict=True, reason="the jaw's rig holds the lower face to the bone, and the lips' seal holds the "
-                   "lips and corners, at full stiffness (physics.rig_control), overriding the zygomatics: docs/speech.md")
 def test_a_smile_under_the_words_keeps_the_lip_corners_raised_while_the_bilabials_close():
     """Happy under "Bob made a map, Pam pays.": the lip corners, measured from where the
     words alone put them, stay at least 60% as raised as happy alone raises them, over

@@ -275,8 +275,15 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
     def moved(block):
         largest[0] = max(largest[0], float(np.abs(block - model.rest_position).max(initial=0.0)))
 
+    shaping = None
+    if spec.speech is not None:  # the jaw carries the face as the rest of the spec shapes it (physics.run)
+        unspoken = spec.model_copy(update={"speech": None})
+        unspoken._source = spec._source
+        shaping = activation_table(unspoken, model.muscles)
+
     def simulated():
-        run(model, table, spec.dt, stop_on_inversion, spec.source, out=out, progress=progress, on_frames=moved)
+        run(model, table, spec.dt, stop_on_inversion, spec.source, out=out, progress=progress, on_frames=moved,
+            shaping=shaping)
         if progress and progress.cancelled:
             return  # a failed render stopped it: neither checked nor reported whole
         check_moved(model, table, largest[0], spec.source)

@@ -108,6 +108,7 @@ def run(
     out: solver.Diagnostics | None = None,
     progress: Progress | None = None,
     on_frames=None,
+    shaping: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Simulate ``activations`` (frames, M) from rest. Returns positions, kinetic energy,
     inverted-triangle counts and smallest relative areas per frame: ``out``'s arrays if
@@ -120,11 +121,15 @@ def run(
     reported done as soon as it is in ``out``, and the run stops early when cancelled;
     ``out.positions`` may then hold fewer frames than the run, a ring reused in turn as
     the caller releases frames (``Progress``). ``on_frames(positions)`` sees each piece's
-    positions (k, n, 3), in the mesh's order, as they are written."""
+    positions (k, n, 3), in the mesh's order, as they are written.
+
+    ``shaping`` (frames, M): activations whose muscles shape the skin that the jaw then
+    carries (``shaped_by_the_muscles``): an expression under words said."""
     frames = len(activations)
     if activations.ndim != 2 or activations.shape[1] != len(model.muscles.names):
         raise ValueError(f"activations must be (frames, {len(model.muscles.names)}), one column per muscle and control")
     n = model.vertex_count
+    shaped = None if shaping is None else shaped_by_the_muscles(model, activations, shaping, dt, source, threads)
     state = layout.State(np.array(model.arrays.rest_position), np.zeros((n, 3)))  # the kernels' vertex order (Model)
     out = diagnostics(frames, n) if out is None else out
     ring = len(out.positions) < frames  # a streamed run: a few frames' room, reused in turn
@@ -137,7 +142,7 @@ def run(
     work, forces = layout.workspace(model.arrays), layout.forces(model.arrays)
     substeps = steps_per_frame(model.material, float(dt))
     factor = model.preconditioner(float(dt) / substeps)
-    piece = 1 if ring else STREAMED_FRAMES if progress else max(1, int(STEPS_PER_CALL / (substeps * n)))
+    piece = 1 if ring or shaped is not None else STREAMED_FRAMES if progress else max(1, int(STEPS_PER_CALL / (substeps * n)))
     scratch = None if model.vertex_order is None else np.empty((min(piece, frames), n, 3))  # the kernels' order
     status, frame, element = layout.OK, -1, -1
     started = time.perf_counter()
@@ -155,8 +160,14 @@ def run(
                     break
             first = start % len(out.positions) if ring else start
             rows = out.positions[first:first + stop - start]
+            arrays = model.arrays
+            if shaped is not None:  # where the jaw takes its skin: the rest shape the muscles made this frame
+                held, offset = shaped
+                rest = arrays.rest_position.copy()
+                rest[held] += offset[start]
+                arrays = arrays._replace(rest_position=rest)
             status, frame, element = simulate(
-                model.arrays, table, start, stop, float(dt), substeps, energy_limit,
+                arrays, table, start, stop, float(dt), substeps, energy_limit,
                 stop_on_inversion, state, control, work, forces, factor,
                 out._replace(positions=rows if scratch is None else scratch[:stop - start]),
             )
@@ -181,6 +192,56 @@ def run(
     if status == layout.RUNAWAY:
         raise SimulationError(f"{source}: simulation diverged at frame {frame}: runaway kinetic energy {energy[frame]:.3g}", frame)
     return positions, energy, inverted, smallest
+
+
+def jaw_family(model: Model) -> list[int]:
+    """The activation columns of the jaw's rig: its opening, the lips' seal, shift and
+    rolls, and the condyles' glides (facesim.physics.rig)."""
+    a = model.arrays
+    columns = [a.jaw_column, a.jaw_seal_column, *a.lip_shift_column, *a.lip_roll_column, *a.jaw_glide_column]
+    return [int(c) for c in columns if c >= 0]
+
+
+def shaped_by_the_muscles(model: Model, activations: np.ndarray, shaping: np.ndarray, dt: float, source: str,
+                          threads) -> tuple | None:
+    """The skin the jaw holds (the lips, the mouth's corners, the skin over the mandible:
+    ``Rig.drive_weight``), as the muscles of ``shaping`` alone shape it, frame by frame:
+    (its rows in the kernels' order, (frames, rows, 3) their displacement from rest), from
+    a run of ``shaping`` with the jaw's rig at rest; None where the jaw does not move in
+    ``activations`` or no muscle acts in ``shaping``.
+
+    The jaw's rig drives that skin to where the bone takes it, with a stiffness far above
+    any muscle's (it keeps the corners' slivers from folding). Driven to where the bone
+    takes its rest shape, a smile under words kept 7% of its lift; driven to where the
+    bone takes the smile's shape, 110%, the bilabials still closing (0.4-0.6 mm at their
+    middles). The words' own muscles stay out of ``shaping``: the visemes were made
+    against the rig's hold, and their lip muscles alone, unheld, fold the mouth's corners."""
+    a = model.arrays
+    family = jaw_family(model)
+    muscles = a.muscle_kind.shape[0]
+    if not family or not activations[:, family].any() or not shaping[:, :muscles].any():
+        return None
+    rows = np.flatnonzero((a.drive_weight > 0) & (a.drive_column == a.jaw_column))
+    if not len(rows):
+        return None
+    still = np.array(shaping, dtype=np.float64)
+    still[:, family] = 0.0
+    offset = np.empty((len(still), len(rows), 3), dtype=np.float32)  # 1.8 KB a frame on the head: the skin alone is not kept
+    ring = Progress(capacity=1)
+    done = [0]
+
+    def keep(positions):
+        for x in positions:
+            offset[done[0]] = model.in_kernel_order(x)[rows] - a.rest_position[rows]
+            ring.release(done[0])
+            done[0] += 1
+
+    run(model, still, dt, stop_on_inversion=False, source=source, threads=threads, out=diagnostics(len(still), model.vertex_count, 1),
+        progress=ring, on_frames=keep)
+    # the shape is carried as far as the rig holds the skin (min(1, 10 a), physics.rig_control):
+    # as the jaw comes to rest the skin is let go where the muscles hold it, not snapped there
+    offset *= np.minimum(1.0, 10.0 * activations[:, family].max(axis=1))[:, None, None]
+    return rows, offset
 
 
 def diagnostics(frames: int, n: int, capacity: int | None = None) -> solver.Diagnostics:
