@@ -125,6 +125,17 @@ def fap_file(path, frames: list[dict[int, list[float]]], fps: float = 25.0) -> N
     path.write_text("\n".join(lines) + "\n")
 
 
+def test_a_frame_of_a_fap_file_on_one_line_reads_the_same(tmp_path):
+    two = "2.1 t 25 2\n" + ("0 0 1" + " 0" * 65 + "\n0 120\n") + ("0 0 1" + " 0" * 65 + "\n1 240\n")
+    one = "2.1 t 25 2\n" + ("0 0 1" + " 0" * 65 + " 0 120\n") + ("0 0 1" + " 0" * 65 + " 1 240\n")
+    from facesim.animation.mpeg4 import read_fap_file
+
+    (tmp_path / "two.fap").write_text(two)
+    (tmp_path / "one.fap").write_text(one)
+    fps, values = read_fap_file(tmp_path / "one.fap")
+    assert fps == 25 and values[3].tolist() == [120.0, 240.0] == read_fap_file(tmp_path / "two.fap")[1][3].tolist()
+
+
 def test_a_fap_file_plays_in_real_time(tmp_path):
     """The jaw opens over the file's frames, and a FAP a frame's mask leaves out holds."""
     frames = [{3: [40.0 * k], 12: [200.0]} if k % 2 == 0 else {3: [40.0 * k]} for k in range(20)]
@@ -143,7 +154,8 @@ def test_a_fap_file_plays_in_real_time(tmp_path):
 
 @pytest.mark.parametrize("text, message", [
     ("2.1 test 25\n", "line 1: expected the header 'version name fps frames'"),
-    ("2.1 test 25 2\n" + "0 0 1" + " 0" * 65 + "\n0 100\n", "the header says 2 frames, which take 4 lines"),
+    ("2.1 test 25 2\n" + "0 0 1" + " 0" * 65 + "\n0 100\n", "the header says 2 frames, and the file ends after 1"),
+    ("2.1 test 25 1\n" + ("0 0 1" + " 0" * 65 + "\n0 100\n") * 2, "line 4: more frames than the header's 1"),
     ("2.1 test 25 1\n" + "0 0 1" + " 0" * 64 + "\n0 100\n", "line 2: expected the mask of frame 0: 68 digits"),
     ("2.1 test 25 1\n" + "0 0 1 1" + " 0" * 64 + "\n0 100\n", "line 3: expected frame 0's number and 2 finite values"),
     ("", "an empty FAP file"),

@@ -21,7 +21,8 @@ FAP 2 (expression) two of the six expressions, each with an intensity 0-63.
 ``read_fap_file`` reads the ASCII FAP file of the standard's reference software: ``#``
 comments, a header ``version name fps frames``, then per frame a line of 68 mask bits
 and a line with the frame's number and the values of the FAPs its mask sets (FAP 1 takes
-four values, FAP 2 six).
+four values, FAP 2 six); the two lines of a frame may also be one (VREng's reader takes
+them so).
 """
 
 from __future__ import annotations
@@ -218,13 +219,20 @@ def read_fap_file(path: Path, source: str | None = None) -> tuple[float, dict[in
     except (ValueError, IndexError):
         raise InputError(f"{where}: line {k}: expected the header 'version name fps frames' (fps 0-240, frames >= 1), "
                          f"got {' '.join(header)!r}") from None
-    if len(body) != 2 * frames:
-        raise InputError(f"{where}: the header says {frames} frames, which take {2 * frames} lines (a mask and the "
-                         f"values each), and the file has {len(body)}")
     values: dict[int, np.ndarray] = {}
     last: dict[int, list[float]] = {}
+    at_line = 0
     for frame in range(frames):
-        (k, mask), (j, line) = body[2 * frame], body[2 * frame + 1]
+        if at_line >= len(body):
+            raise InputError(f"{where}: the header says {frames} frames, and the file ends after {frame}")
+        k, mask = body[at_line]
+        if len(mask) > 68:  # the mask and the values on one line (as VREng's reader takes them)
+            mask, line, j = mask[:68], mask[68:], k
+            at_line += 1
+        elif at_line + 1 < len(body):
+            (j, line), at_line = body[at_line + 1], at_line + 2
+        else:
+            raise InputError(f"{where}: line {k}: frame {frame}'s mask has no line of values after it")
         if len(mask) != 68 or any(m not in ("0", "1") for m in mask):
             raise InputError(f"{where}: line {k}: expected the mask of frame {frame}: 68 digits 0 or 1")
         numbers = [n + 1 for n, m in enumerate(mask) if m == "1"]
@@ -243,6 +251,8 @@ def read_fap_file(path: Path, source: str | None = None) -> tuple[float, dict[in
             at += size
         for n, held in last.items():
             values.setdefault(n, np.zeros((frames, FILE_VALUES.get(n, 1))))[frame] = held
+    if at_line < len(body):
+        raise InputError(f"{where}: line {body[at_line][0]}: more frames than the header's {frames}")
     return fps, {n: (v[:, 0] if n not in FILE_VALUES else v) for n, v in values.items()}
 
 
