@@ -38,7 +38,7 @@ from .errors import FacesimError, InputError
 
 #: The files facesim writes, by suffix, with the bytes each kind starts with (at offset).
 MAGIC = {".mp4": (4, b"ftyp"), ".glb": (0, b"glTF"), ".pc2": (0, b"POINTCACHE2"), ".gif": (0, b"GIF8"), ".npz": (0, b"PK"), ".png": (0, b"\x89PNG"),
-         ".obj": None, ".yaml": None, ".json": None, ".csv": None, ".parquet": (0, b"PAR1")}
+         ".obj": None, ".yaml": None, ".json": None, ".csv": None, ".parquet": (0, b"PAR1"), ".usdc": (0, b"PXR-USDC")}
 #: What facesim writes into every directory it makes (a frames directory, a face
 #: directory): each file's SHA-256. ``--force`` replaces a directory only while it holds
 #: exactly those files with those contents, so a user's file that a name would pass for

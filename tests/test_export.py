@@ -100,6 +100,7 @@ def exported(tmp_path_factory):
     clip = facesim("render", HAPPY, "-o", out / "happy.glb", check=0)
     curves = facesim("render", HAPPY, "-o", out / "happy.csv", check=0)
     facesim("render", HAPPY, "-o", out / "happy.pc2", check=0)
+    facesim("render", HAPPY, "-o", out / "happy.usdc", check=0)
     facesim("render", HAPPY, "-o", out / "happy.npz", check=0)
     return out, rig.stderr, clip.stderr, curves.stderr
 
@@ -277,6 +278,41 @@ def test_the_point_cache_is_every_vertex_of_facesims_frames_with_its_rest_mesh(e
     (mine / "happy.obj").write_text("my own mesh\n")
     one_line_error(facesim("render", HAPPY, "-o", mine / "happy.pc2"), 2, "happy.obj", "already exists")
     assert sorted(p.name for p in mine.iterdir()) == ["happy.obj"]
+
+
+def test_the_usd_point_cache_is_every_vertex_of_facesims_frames_with_icts_parts_and_uvs(exported):
+    """-o happy.usdc (the usd extra): one mesh, the NPZ's vertices as its points' time
+    samples, frame for frame, in centimetres at the clip's fps; ICT's triangles, its
+    material parts as GeomSubsets covering every triangle once, its UVs face-varying."""
+    from pxr import Usd, UsdGeom
+
+    out, *_ = exported
+    assert (out / "happy.usdc").read_bytes()[:8] == b"PXR-USDC"
+    stage = Usd.Stage.Open(str(out / "happy.usdc"))
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Head/Head"))
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 0.01 and UsdGeom.GetStageUpAxis(stage) == "Y"
+    assert stage.GetTimeCodesPerSecond() == 25 and mesh.GetPointsAttr().GetTimeSamples() == list(range(35))
+    with np.load(out / "happy.npz") as npz:
+        positions, faces = npz["positions"], npz["faces"]
+    for k in range(35):
+        assert np.abs(np.array(mesh.GetPointsAttr().Get(k)) - positions[k]).max() < 1e-5, k
+    assert np.array_equal(np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3), faces)
+    subsets = UsdGeom.Subset.GetGeomSubsets(mesh, UsdGeom.Tokens.face, "part")
+    covered = np.concatenate([np.array(s.GetIndicesAttr().Get()) for s in subsets])
+    assert "M_Face" in [s.GetPrim().GetName() for s in subsets] and np.array_equal(np.sort(covered), np.arange(len(faces)))
+    st = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
+    assert st.GetInterpolation() == UsdGeom.Tokens.faceVarying and len(st.Get()) == 3 * len(faces)
+
+
+def test_usd_without_its_package_is_one_line(tmp_path, monkeypatch):
+    import sys
+
+    from facesim.errors import InputError
+    from facesim.export.output import check_output
+
+    monkeypatch.setitem(sys.modules, "pxr", None)
+    with pytest.raises(InputError, match=r"needs Pixar's USD: pip install 'facesim\[usd\]'"):
+        check_output(tmp_path / "x.usdc", force=False)
 
 
 def _gltf_axes(x: np.ndarray) -> np.ndarray:

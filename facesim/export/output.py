@@ -33,10 +33,10 @@ from ..timings import phase
 from ..workers import worker_pool
 
 FULL_DISK = 1 << 20  # bytes free under which a short output is put down to a full disk
-KINDS = {".mp4": "mp4", ".gif": "gif", ".npz": "npz", ".glb": "glb", ".csv": "csv", ".pc2": "pc2"}
+KINDS = {".mp4": "mp4", ".gif": "gif", ".npz": "npz", ".glb": "glb", ".csv": "csv", ".pc2": "pc2", ".usdc": "usdc"}
 #: The kinds that carry the face to other tools, undrawn: a rig and its curves
 #: (facesim.export.rig), a point cache (facesim.export.pointcache).
-EXPORTS = ("glb", "csv", "pc2")
+EXPORTS = ("glb", "csv", "pc2", "usdc")
 #: Arrow length per unit of muscle force in --show-muscles (cm per force unit).
 ARROW_SCALE = 0.004
 
@@ -57,7 +57,7 @@ def check_output(path: str | Path, force: bool, settings: RenderSettings | None 
     path = Path(path)
     if kind == "unknown":
         raise InputError(f"{path}: unknown output type {path.suffix!r} (use .mp4, .gif, .npz, .png, a directory "
-                         "written DIR/, .glb, .csv or .pc2)")
+                         "written DIR/, .glb, .csv, .pc2 or .usdc)")
     if kind == "mp4" and settings is not None and (settings.width % 2 or settings.height % 2):
         raise InputError(f"--size: MP4 needs an even width and height, got {settings.width}x{settings.height}")
     if kind == "pc2":
@@ -65,6 +65,10 @@ def check_output(path: str | Path, force: bool, settings: RenderSettings | None 
 
         check_point_cache(path, force)
     else:
+        if kind == "usdc":
+            from .usd import check_usd
+
+            check_usd()
         check_destination(path, force, directory=kind == "png")
     return kind
 

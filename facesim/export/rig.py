@@ -39,11 +39,13 @@ class Exported:
     size: int
     fit: Fit | None
     correctives: int = 0
+    rest_beside: bool = True  # a point cache's rest mesh in a file of its own (PC2's OBJ; USD holds its own)
 
     def summary(self) -> str:
         size = f"{self.size / 2**20:.1f} MB" if self.size >= 2**20 else f"{self.size / 1024:.0f} KB"
         if self.fit is None and self.frames:
-            return f"{self.frames} frames of every vertex of the head, and its rest mesh beside it, {size}"
+            beside = ", and its rest mesh beside it" if self.rest_beside else ", its parts and texture coordinates"
+            return f"{self.frames} frames of every vertex of the head{beside}, {size}"
         if self.fit is None:
             return f"{len(ARKIT_52)} ARKit shapes baked by the physics, {size}"
         extra = f" and {self.correctives} correctives" if self.correctives else ""
@@ -135,11 +137,16 @@ def _verify_csv(frames: int):
 
 def write_clip(animation, spec, path: str | Path, kind: str, replace: bool = False) -> Exported:
     """An animation as ``kind``: ``glb`` (the rig and its clip), ``csv`` (Live Link Face's
-    curves) or ``pc2`` (the point cache and its rest mesh: facesim.export.pointcache)."""
+    curves), ``pc2`` (the point cache and its rest mesh: facesim.export.pointcache) or
+    ``usdc`` (the point cache as USD: facesim.export.usd)."""
     if kind == "pc2":
         from .pointcache import write_point_cache
 
         return Exported(animation.frames, write_point_cache(animation, path, replace), None)
+    if kind == "usdc":
+        from .usd import write_usd
+
+        return Exported(animation.frames, write_usd(animation, path, replace), None, rest_beside=False)
     shapes = bake(spec)
     clip, fit = clip_of(animation, shapes)
     if kind == "glb":  # the clip's own correctives on top (blendshapes.with_correctives): played as facesim drew it
