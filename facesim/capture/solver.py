@@ -1,23 +1,31 @@
 """From tracked landmarks to a performance: the head's pose, the eyes' gaze and ARKit's
-shapes per frame, solved against facesim's own landmark motion.
+shapes per frame, solved against facesim's own landmark motion as MediaPipe sees it.
 
-1. **Pose.** Each frame's landmarks (the face frame: x the subject's left, y up, z toward
-   the camera) are fitted by the similarity (Umeyama 1991) that best takes the head's
-   landmarks at rest onto them, on points that expressions barely move (the forehead, the
-   nose's bridge, the eyes' outer corners, the cheekbones, the face's sides). Its rotation
-   is the head's yaw, pitch and roll (facesim.geometry.rotation's order); taking it away
-   puts the frame's landmarks into the head's frame, in its centimetres.
-2. **The subject's own neutral.** The median of the first frames (``NEUTRAL_SECONDS``)
-   in the head's frame is the reference that expressions are measured from, so that a
-   face's shape, anyone's, is not read as an expression: the video should start neutral.
-3. **Smoothing without lag.** The landmarks in the head's frame are smoothed over time by
-   a Savitzky-Golay filter (a centred, zero-phase least-squares polynomial), which
-   removes the tracker's jitter and leaves peaks where they are.
-4. **Shapes.** Each frame's landmark motion is solved, by bounded least squares with a
-   small ridge (scipy's ``lsq_linear``, weights in [0, 1]), as a sum of ARKit's shapes'
-   landmark motion on facesim's head: the shapes baked by the physics
-   (facesim.animation.blendshapes), each at its full weight, read at MediaPipe's landmarks.
-5. **Gaze.** Each iris's centre, against where it is in the neutral frames, is an
+1. **The basis** (``head_basis``, kept in facesim's cache). Each shape held by the physics
+   on the default head at ``BASIS_WEIGHTS``, rendered from the front, its landmarks found
+   and put into the head's frame; its motion per unit weight is the slope through them.
+   The neutral head turned by known angles measures how MediaPipe misreads a turned
+   head: its angles (``TURNS``) and, on a yaw-by-pitch grid, its landmarks in the image
+   (``GRID``, ``_image_residual``).
+2. **Pose.** Each frame's landmarks (the face frame: x the subject's left, y up, z toward
+   the camera) are fitted by the similarity (Umeyama 1991) that best takes a template
+   onto them, first at the ``RIGID`` landmarks, which expressions barely move. Its
+   rotation is the head's yaw, pitch and roll (facesim.geometry.rotation's order), from
+   how it faced the camera at first, calibrated by ``TURNS``.
+3. **The subject's own neutral.** The median of the first frames (``NEUTRAL_SECONDS``)
+   in the head's frame is what expressions are measured from, so that a face's shape,
+   anyone's, is not read as an expression: the video should start neutral.
+4. **Shapes, in the image.** The neutral, turned and placed by the frame's pose, plus the
+   turned head's misreading, plus the shapes' motion turned with it, is solved against
+   the frame's landmarks in the image (x, y: MediaPipe's depth is a guess) by bounded
+   least squares with a small ridge (scipy's ``lsq_linear``, weights 0-1), the side
+   turned away counting less (``FAR_SIDE``). The pose is then fitted again on every
+   landmark with the frame's shapes in the template, and the shapes solved again
+   (``REFINEMENTS``), so that neither is read as the other.
+5. **Smoothing without lag.** Weights, angles and the irises are smoothed over time by a
+   Savitzky-Golay filter (a centred, zero-phase least-squares polynomial), which removes
+   the tracker's jitter and leaves peaks where they are.
+6. **Gaze.** Each iris's centre, against where it is in the neutral frames, is an
    eye's turn: asin(offset / the eyeball's radius), held through blinks.
 
 Frames with no face, or a face turned past ``TURN_LIMIT``, are bridged by straight lines
@@ -58,8 +66,6 @@ REFINEMENTS = 2
 #: How much less the side turned away counts: 1 - FAR_SIDE x (how far out) x sin(yaw).
 FAR_SIDE = 1.0
 
-#: Depth is MediaPipe's least certain coordinate: its residuals count this much.
-DEPTH_WEIGHT = 0.5
 #: The Savitzky-Golay filter's window (seconds) and polynomial order.
 SMOOTHING, ORDER = 0.2, 2
 
@@ -94,7 +100,7 @@ class Performance:
 @dataclass(frozen=True)
 class Basis:
     """The head at rest at MediaPipe's landmarks (468, 3) cm (the template the pose is
-    fitted to), each solved shape's landmark motion at its full weight (S, 470, 3: the
+    first fitted to), each solved shape's landmark motion per unit weight (S, 470, 3: the
     468 and the irises' centres, in the head's frame, cm), the eyeballs' radius (cm)."""
 
     rest: np.ndarray
@@ -102,20 +108,15 @@ class Basis:
     eye_radius: float
     turns: dict[str, np.ndarray] = field(default_factory=dict)  # TURNS' tables, GRID's residuals
 
-    def turned(self, raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For the ``raw`` (frames, 3) angles a fit found: the head's true angles, and
-        what MediaPipe's landmarks of a head so turned wrongly move by in the head's frame
-        (frames, 470, 3), measured on the neutral head turned by known angles (``TURNS``)
-        and interpolated, the yaw's and the pitch's added."""
-        angles, moved = raw.copy(), np.zeros((len(raw), *self.motion.shape[1:]))
+    def true_angles(self, raw: np.ndarray) -> np.ndarray:
+        """The head's true yaw, pitch and roll for the ``raw`` (frames, 3) angles a fit
+        found: measured on the neutral head turned by known angles (``TURNS``) and
+        interpolated; the roll as found."""
+        angles = raw.copy()
         for axis, name in enumerate(("yaw", "pitch")):
             order = np.argsort(self.turns[f"{name}_seen"])
-            seen, true, table = (self.turns[f"{name}_{part}"][order] for part in ("seen", "true", "moved"))
-            angles[:, axis] = np.interp(raw[:, axis], seen, true)
-            j = np.clip(np.searchsorted(seen, raw[:, axis]) - 1, 0, len(seen) - 2)
-            f = np.clip((raw[:, axis] - seen[j]) / (seen[j + 1] - seen[j]), 0.0, 1.0)[:, None, None]
-            moved += (1 - f) * table[j] + f * table[j + 1]
-        return angles, moved
+            angles[:, axis] = np.interp(raw[:, axis], self.turns[f"{name}_seen"][order], self.turns[f"{name}_true"][order])
+        return angles
 
     def image_residual(self, yaw: float, pitch: float) -> np.ndarray:
         """(468, 2) ``_image_residual`` of the neutral head at this true yaw and pitch,
@@ -223,7 +224,6 @@ def _rendered_motion(spec, rest: np.ndarray) -> dict[str, np.ndarray]:
                 found.append(canonical(seen(neutral, pose), at_rest, range(LANDMARKS)))
             out[f"{name}_true"] = np.asarray(TURNS[name])
             out[f"{name}_seen"] = np.array([angles[axis] for angles, _ in found])
-            out[f"{name}_moved"] = np.stack([faces - at_rest for _, faces in found])
         out["grid_residual"] = np.stack([[_image_residual(seen(neutral, np.array([yaw, pitch, 0.0, 0.0, 0.0])), at_rest)
                                           for pitch in GRID["pitch"]] for yaw in GRID["yaw"]])
         return out
@@ -285,13 +285,15 @@ def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None
     for k in np.flatnonzero(good):
         seen = points(k)
         raw[k], faces[k] = canonical(seen, neutral, RIGID)
-        weights[k] = _shapes_in_the_image(seen, neutral, np.zeros(len(SOLVED)), raw[k], basis, RIGID)
+        yaw, pitch, _ = basis.true_angles(raw[k:k + 1])[0]
+        misread = basis.image_residual(yaw, pitch)
+        weights[k] = _shapes_in_the_image(seen, neutral, np.zeros(len(SOLVED)), misread, basis, RIGID)
         for _ in range(REFINEMENTS):  # the pose again, on every landmark, the shapes' motion in the template
-            weights[k] = _shapes_in_the_image(seen, neutral, weights[k], raw[k], basis, range(LANDMARKS))
+            weights[k] = _shapes_in_the_image(seen, neutral, weights[k], misread, basis, range(LANDMARKS))
         if progress:
             progress(1)
     weights, raw, faces = bridged(weights, good), bridged(raw, good), bridged(faces, good)
-    head, _ = basis.turned(raw)
+    head = basis.true_angles(raw)
     window = max(ORDER + 1, int(round(SMOOTHING * fps)) | 1)
     if frames > window:
         weights = np.clip(savgol_filter(weights, window, ORDER, axis=0), 0.0, 1.0)
@@ -302,22 +304,21 @@ def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None
                        turned=np.flatnonzero(turned).tolist())
 
 
-def _shapes_in_the_image(points: np.ndarray, neutral: np.ndarray, weights: np.ndarray, raw: np.ndarray, basis: Basis,
+def _shapes_in_the_image(points: np.ndarray, neutral: np.ndarray, weights: np.ndarray, misread: np.ndarray, basis: Basis,
                          fitted) -> np.ndarray:
     """One frame's shapes, solved where MediaPipe is surest, in the image: the head fitted
     at the ``fitted`` landmarks to the subject's neutral moved by ``weights``, the shapes'
     motion turned and scaled by that fit, what MediaPipe's landmarks of a head so turned
-    are off by (``Basis.image_residual``) allowed for, and the landmarks' image positions
-    (x, y) solved by bounded least squares with a ridge. A turned face's hidden side,
+    are off by (``misread``: ``Basis.image_residual``) allowed for, and the landmarks'
+    image positions (x, y) solved by bounded least squares with a ridge. A turned face's hidden side,
     whose depth MediaPipe guesses, counts only as far as it shows."""
     from scipy.optimize import lsq_linear
 
     fitted = list(fitted)
     template = neutral[:LANDMARKS] + np.tensordot(weights, basis.motion[:, :LANDMARKS], axes=1)
     scale, rotation, translation = similarity(template[fitted], points[fitted])
-    true, _ = basis.turned(raw[None])
     start = scale * neutral[:LANDMARKS] @ rotation.T + translation
-    start[:, :2] += scale * basis.image_residual(true[0, 0], true[0, 1])
+    start[:, :2] += scale * misread
     # the side of the face turned away counts less, the more so the further out and the more turned
     away = np.clip(np.sign(rotation[0, 2]) * neutral[:LANDMARKS, 0] / np.abs(neutral[:LANDMARKS, 0]).max(), 0.0, 1.0)
     counts = np.clip(1.0 - FAR_SIDE * away * abs(rotation[0, 2]), 0.1, 1.0)[:, None]
