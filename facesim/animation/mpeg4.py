@@ -28,7 +28,7 @@ them so).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -108,7 +108,7 @@ def _gaze_gain(fap: FAP) -> FAP:
         degrees = GAZE_ANGLE[GAZE.index(control.rsplit("_", 1)[0])]
         return math.radians(degrees) / ANGLE_UNIT
 
-    return FAP(**{**fap.__dict__, "gain": (angle(fap.plus), angle(fap.minus))})
+    return replace(fap, gain=(angle(fap.plus), angle(fap.minus)))
 
 
 def fap_number(key: int | str) -> int:

@@ -295,12 +295,12 @@ class Spec(Strict):
         if not isinstance(self.fap, Path):
             return self
         fps, values = read_fap_file(self.fap, f"fap: {self.fap}")
-        self._fap_stream = (fps, values)
+        count = len(next(iter(values.values()))) if values else 1  # a file whose masks set nothing holds no values
+        self._fap_stream = (fps, count, values)
         if "fps" not in self.model_fields_set:
             object.__setattr__(self, "fps", fps)
         if "frames" not in self.model_fields_set and not self.sequence:
-            frames = len(next(iter(values.values()))) if values else 1
-            object.__setattr__(self, "frames", min(math.ceil(frames * self.fps / fps), MAX_FRAMES))
+            object.__setattr__(self, "frames", min(math.ceil(count * self.fps / fps), MAX_FRAMES))
         return self
 
     @model_validator(mode="after")
@@ -323,8 +323,8 @@ class Spec(Strict):
         keys ([frame, value], as a timeline's) linearly between them."""
         frames = self.frames
         if self._fap_stream is not None:
-            fps, values = self._fap_stream
-            index = np.minimum(np.round(np.arange(frames) * self.dt * fps).astype(int), len(next(iter(values.values()))) - 1)
+            fps, count, values = self._fap_stream
+            index = np.minimum(np.round(np.arange(frames) * self.dt * fps).astype(int), count - 1)
             return {n: v[index] for n, v in values.items()}
         out = {}
         for number, value in (self.fap or {}).items():
