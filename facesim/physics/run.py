@@ -130,6 +130,8 @@ def run(
         raise ValueError(f"activations must be (frames, {len(model.muscles.names)}), one column per muscle and control")
     n = model.vertex_count
     shaped = None if shaping is None else shaped_by_the_muscles(model, activations, shaping, dt, source, threads)
+    if shaped is not None:  # the rest positions a frame's rig reads, the held rows rewritten each frame
+        shaped = (*shaped, np.array(model.arrays.rest_position))
     state = layout.State(np.array(model.arrays.rest_position), np.zeros((n, 3)))  # the kernels' vertex order (Model)
     out = diagnostics(frames, n) if out is None else out
     ring = len(out.positions) < frames  # a streamed run: a few frames' room, reused in turn
@@ -162,9 +164,8 @@ def run(
             rows = out.positions[first:first + stop - start]
             arrays = model.arrays
             if shaped is not None:  # where the jaw takes its skin: the rest shape the muscles made this frame
-                held, offset = shaped
-                rest = arrays.rest_position.copy()
-                rest[held] += offset[start]
+                held, offset, rest = shaped
+                rest[held] = model.arrays.rest_position[held] + offset[start]
                 arrays = arrays._replace(rest_position=rest)
             status, frame, element = simulate(
                 arrays, table, start, stop, float(dt), substeps, energy_limit,
@@ -213,8 +214,8 @@ def shaped_by_the_muscles(model: Model, activations: np.ndarray, shaping: np.nda
     The jaw's rig drives that skin to where the bone takes it, with a stiffness far above
     any muscle's (it keeps the corners' slivers from folding). Driven to where the bone
     takes its rest shape, a smile under words kept 7% of its lift; driven to where the
-    bone takes the smile's shape, 110%, the bilabials still closing (0.4-0.6 mm at their
-    middles). The words' own muscles stay out of ``shaping``: the visemes were made
+    bone takes the smile's shape, at least 70%, the bilabials still closing (0.43-0.85 mm
+    at their middles). The words' own muscles stay out of ``shaping``: the visemes were made
     against the rig's hold, and their lip muscles alone, unheld, fold the mouth's corners."""
     a = model.arrays
     family = jaw_family(model)
