@@ -21,6 +21,14 @@ own jaw weights, so a turned jaw joint moves them as facesim's jaw does) and ``e
 (``jawOpen`` opens the teeth too, for an engine that drives shapes alone); the jaw joint
 is for a user who wants to drive it as a bone.
 
+A face directory's rig (``face``: facesim face from-photo) is the same head in its
+identity, with the photo baked into the directory's atlas (head.png, embedded) as the base
+colour of the parts the atlas holds (skin, back of the head, scleras, irises), drawn as
+facesim's photo look draws them: unlit (``UNLIT``), the eyelashes left out (the photo's own are in the
+texture). glTF keeps one texture coordinate per vertex, so a vertex where the atlas's
+islands meet is split (``texture_seams``): the first 26,719 vertices are still ICT's, in its
+order, and each one after is a copy of ICT's vertex ``mesh.extras.seams[i]``.
+
 A clip (``Clip``): morph weights per frame (facesim's simulated frames fitted onto the
 targets: facesim.animation.blendshapes.fit_weights) and the head's and eyes' rotations,
 LINEAR samplers at the clip's frame times.
@@ -29,6 +37,7 @@ LINEAR samplers at the clip's frame times.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -41,12 +50,16 @@ METRES = 0.01
 MOVED = 1e-3
 #: ... and the normals that turn by more than this (unit vector difference, about 0.3°).
 TURNED = 5e-3
+#: The photo's parts are drawn unlit, as facesim's photo look draws them: the photo
+#: carries its own light (lit again, the face darkened and its shading doubled in three.js).
+UNLIT = "KHR_materials_unlit"
 #: The skeleton's joints, parents first.
 JOINTS = ("neck", "head", "jaw", "eye_L", "eye_R")
 _PARENT = {"head": "neck", "jaw": "head", "eye_L": "head", "eye_R": "head"}
 
 _FLOAT, _UBYTE, _USHORT, _UINT = 5126, 5121, 5123, 5125
 _ARRAY, _ELEMENTS = 34962, 34963
+_LINEAR, _CLAMP = 9729, 33071
 
 
 @dataclass(frozen=True)
@@ -151,15 +164,47 @@ def _skin_weights(figure, n: int) -> tuple[np.ndarray, np.ndarray]:
     return joints, weights
 
 
+def texture_seams(figure, n: int) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """The vertices of a textured rig: (n + e,) ``source``, the ICT vertex each is (ICT's
+    ``n`` first, as themselves), (n + e, 2) their texture coordinates in glTF's convention
+    (v down; the atlas's is up, as OBJ's) and, per textured part, its triangles over them.
+    An ICT vertex keeps its own row for the first coordinate it takes in the atlas and is
+    copied for each further one (where the atlas's islands meet), and for every one if an
+    untextured part also draws it (its colour there is not the texture's)."""
+    textured = [p for p in figure.parts if p.uv is not None]
+    plain = np.zeros(n, dtype=bool)
+    for part in figure.parts:
+        if part.uv is None:
+            plain[part.triangles.ravel()] = True
+    corners = np.column_stack([np.concatenate([p.triangles.ravel() for p in textured]).astype(np.float64),
+                               np.concatenate([p.uv.reshape(-1, 2) for p in textured])])
+    pairs, corner_row = np.unique(corners, axis=0, return_inverse=True)  # sorted by vertex, then coordinate
+    vertex = pairs[:, 0].astype(np.int64)
+    own = np.r_[True, vertex[1:] != vertex[:-1]] & ~plain[vertex]
+    row = np.where(own, vertex, n + np.cumsum(~own) - 1)
+    source = np.concatenate([np.arange(n), vertex[~own]])
+    uv = np.zeros((len(source), 2))
+    uv[row] = pairs[:, 1:]
+    uv[:, 1] = np.where(np.isin(np.arange(len(source)), row), 1.0 - uv[:, 1], 0.0)
+    triangles, start = {}, 0
+    for part in textured:
+        count = part.triangles.size
+        triangles[part.name] = row[corner_row.ravel()[start:start + count]].reshape(-1, 3)
+        start += count
+    return source, uv, triangles
+
+
 def _joint_positions(figure) -> dict[str, np.ndarray]:
     """Each joint's place in the head's frame (cm)."""
     (_, left), (_, right) = figure.eyes
     return {"neck": figure.neck, "head": figure.neck, "jaw": figure.jaw_hinge, "eye_L": left, "eye_R": right}
 
 
-def rig_glb(shapes, figure, clip: Clip | None = None, name: str = "facesim head") -> bytes:
+def rig_glb(shapes, figure, clip: Clip | None = None, name: str = "facesim head", texture: Path | None = None) -> bytes:
     """The GLB's bytes: the rig of ``shapes`` (facesim.animation.blendshapes.Shapes) on the
-    head ``figure`` (facesim.face.figure.Figure), with ``clip`` if given (module docstring)."""
+    head ``figure`` (facesim.face.figure.Figure), with ``clip`` if given and, with a face
+    directory's ``texture`` (its atlas, a PNG), the photo on the parts it holds (module
+    docstring)."""
     import pygltflib as g
 
     from ..physics.model import vertex_normals
@@ -175,39 +220,63 @@ def rig_glb(shapes, figure, clip: Clip | None = None, name: str = "facesim head"
     normals[unused] = (0.0, 0.0, 1.0)  # vertices no drawn part uses (ICT's hidden shells) keep a valid normal
     colour = np.array(figure.colour, dtype=np.float64)
     colour[:, :3] = srgb_to_linear(colour[:, :3])
+    source, uv, textured = np.arange(n), None, {}
+    if texture is not None:
+        source, uv, textured = texture_seams(figure, n)
+        colour = colour[source]
+        colour[np.unique(np.concatenate(list(textured.values())))] = 1.0  # COLOR_0 multiplies the texture
+    count = len(source)
     joints, skin = _skin_weights(figure, n)
     attributes = g.Attributes(
-        POSITION=out.accessor((rest * METRES).astype(np.float32), "VEC3", _FLOAT, _ARRAY, bounds=True),
-        NORMAL=out.accessor(normals.astype(np.float32), "VEC3", _FLOAT, _ARRAY),
+        POSITION=out.accessor((rest[source] * METRES).astype(np.float32), "VEC3", _FLOAT, _ARRAY, bounds=True),
+        NORMAL=out.accessor(normals[source].astype(np.float32), "VEC3", _FLOAT, _ARRAY),
         COLOR_0=out.accessor(np.rint(colour * 255).astype(np.uint8), "VEC4", _UBYTE, _ARRAY, normalized=True),
-        JOINTS_0=out.accessor(joints, "VEC4", _UBYTE, _ARRAY),
-        WEIGHTS_0=out.accessor(skin, "VEC4", _FLOAT, _ARRAY),
+        JOINTS_0=out.accessor(joints[source], "VEC4", _UBYTE, _ARRAY),
+        WEIGHTS_0=out.accessor(skin[source], "VEC4", _FLOAT, _ARRAY),
+        TEXCOORD_0=None if uv is None else out.accessor(uv.astype(np.float32), "VEC2", _FLOAT, _ARRAY),
     )
     targets = []
     for k in range(len(shapes.names)):
-        delta = shapes.deltas[k].astype(np.float64)
+        delta = shapes.deltas[k].astype(np.float64)[source]
         moved = np.flatnonzero(np.linalg.norm(delta, axis=1) >= MOVED)
         turn, turned = np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
         if not shapes.names[k].startswith(CORRECTIVE):  # a clip's correctives are fractions of a millimetre: no turn
-            turn = vertex_normals(rest + delta, drawn)
+            turn = vertex_normals(rest + shapes.deltas[k], drawn)
             turn[unused] = normals[unused]
-            turn -= normals
+            turn = (turn - normals)[source]
             turned = np.flatnonzero(np.linalg.norm(turn, axis=1) > TURNED)
-        targets.append(g.Attributes(POSITION=out.sparse(n, moved, delta[moved] * METRES, bounds=True),
-                                  NORMAL=out.sparse(n, turned, turn[turned], bounds=False)))
+        targets.append(g.Attributes(POSITION=out.sparse(count, moved, delta[moved] * METRES, bounds=True),
+                                  NORMAL=out.sparse(count, turned, turn[turned], bounds=False)))
+    photo = None
+    if texture is not None:
+        gltf.images.append(g.Image(bufferView=out.view(np.frombuffer(Path(texture).read_bytes(), np.uint8)),
+                                   mimeType="image/png", name="the photo, baked"))
+        gltf.samplers.append(g.Sampler(magFilter=_LINEAR, minFilter=_LINEAR, wrapS=_CLAMP, wrapT=_CLAMP))
+        gltf.textures.append(g.Texture(sampler=0, source=0))
+        photo = g.TextureInfo(index=0)
+        gltf.extensionsUsed.append(UNLIT)
+    small = count < 65535
     primitives = []
     for part in figure.parts:
+        if texture is not None and part.name == "M_EyeLashes":
+            continue  # the photo's own lashes are in its texture, as facesim's photo look draws it
         see_through = part.name == "M_EyeLashes"
+        on_photo = part.name in textured
         gltf.materials.append(g.Material(
             name=part.name, doubleSided=see_through, alphaMode="BLEND" if see_through else None,
             pbrMetallicRoughness=g.PbrMetallicRoughness(baseColorFactor=[1.0, 1.0, 1.0, 1.0], metallicFactor=0.0,
-                                                      roughnessFactor=float(part.roughness))))
-        indices = out.accessor(part.triangles.astype(np.uint16 if n < 65535 else np.uint32).ravel(), "SCALAR",
-                               _USHORT if n < 65535 else _UINT, _ELEMENTS)
+                                                      roughnessFactor=float(part.roughness),
+                                                      baseColorTexture=photo if on_photo else None),
+            extensions={UNLIT: {}} if on_photo else {}))
+        triangles = textured[part.name] if on_photo else part.triangles
+        indices = out.accessor(triangles.astype(np.uint16 if small else np.uint32).ravel(), "SCALAR",
+                               _USHORT if small else _UINT, _ELEMENTS)
         primitives.append(g.Primitive(attributes=attributes, indices=indices, material=len(gltf.materials) - 1,
                                     targets=targets))
-    gltf.meshes.append(g.Mesh(name=name, primitives=primitives, weights=[0.0] * len(shapes.names),
-                            extras={"targetNames": list(shapes.names)}))
+    extras = {"targetNames": list(shapes.names)}
+    if texture is not None:
+        extras["seams"] = source[n:].tolist()
+    gltf.meshes.append(g.Mesh(name=name, primitives=primitives, weights=[0.0] * len(shapes.names), extras=extras))
 
     places = _joint_positions(figure)
     for joint in JOINTS:

@@ -98,7 +98,8 @@ def write_rig(spec, path: str | Path, replace: bool = False) -> Exported:
     from ..face.figure import figure_for
 
     shapes = bake(spec)
-    data = rig_glb(shapes, figure_for(model_for(spec)), name=f"facesim {spec.title}")
+    face = spec.face_directory
+    data = rig_glb(shapes, figure_for(model_for(spec)), name=f"facesim {spec.title}", texture=face and face.texture)
     _write_bytes(data, Path(path), replace, _verify_glb(len(shapes.names), None))
     return Exported(0, len(data), None)
 
@@ -152,7 +153,8 @@ def write_clip(animation, spec, path: str | Path, kind: str, replace: bool = Fal
     if kind == "glb":  # the clip's own correctives on top (blendshapes.with_correctives): played as facesim drew it
         shapes, fit = with_correctives(shapes, lambda k: unturned(animation, k), animation.frames, fit)
         clip = dataclasses.replace(clip, weights=fit.weights)
-        data = rig_glb(shapes, animation.figure, clip, name=f"facesim {spec.title}")
+        data = rig_glb(shapes, animation.figure, clip, name=f"facesim {spec.title}",
+                       texture=animation.face and animation.face.texture)
         _write_bytes(data, Path(path), replace, _verify_glb(len(shapes.names), animation.frames))
     else:
         data = live_link_csv(clip).encode()
