@@ -169,14 +169,70 @@ def fit_weights(shapes: Shapes, frames) -> Fit:
 
 
 #: A clip's playback is made faithful (``with_correctives``) until its error over the face
-#: area is within these (cm): half of issue 47's bounds (0.5 mm RMS, 2 mm at most) ...
-FAITHFUL_RMS, FAITHFUL_LARGEST = 0.025, 0.1
+#: area is within these (cm): 0.45 mm RMS and 1.8 mm at most, inside issue 47's bounds (0.5 and 2 mm) ...
+FAITHFUL_RMS, FAITHFUL_LARGEST = 0.045, 0.18
 #: The correctives' names: this and their number from 1.
 CORRECTIVE = "corrective_"
-#: ... with at most this many correctives, found from at most SAMPLED of its frames, each
-#: holding only the vertices it moves at least CORRECTIVE_MOVED (cm: 0.05 mm; its size in
-#: the file follows the vertices it holds).
-MOST_CORRECTIVES, SAMPLED, CORRECTIVE_MOVED = 8, 240, 5e-3
+#: ... with at most this many correctives, found from at most SAMPLED of its frames ...
+MOST_CORRECTIVES, SAMPLED = 8, 240
+#: ... each holding only the vertices it moves at least as far as one of these (cm: 1.5 to
+#: 0.05 mm): of the components and the least motion kept that bring the playback within
+#: the bounds, the ones that store the fewest numbers (``_stored``), since a corrective's
+#: size in the file follows the vertices it holds (happy's three over every vertex they
+#: move by 0.05 mm: 213 KB in the GLB, 0.16 mm RMS; as chosen: 41 KB, 0.41 mm RMS).
+CORRECTIVE_MOVED = (1.5e-1, 1.25e-1, 1e-1, 8e-2, 5e-2, 3e-2, 2e-2, 1e-2, 5e-3)
+#: ... and kept to this step (cm): a normalised 16-bit integer's in metres (1/32767 m, 0.03
+#: mm), as the GLB stores a corrective (facesim.export.gltf, KHR_mesh_quantization), so that
+#: the fit's error is the error of what is written.
+CORRECTIVE_STEP = 100.0 / 32767
+
+
+def _faithful(errors: np.ndarray) -> bool:
+    """Whether (frames, vertices) playback errors over the face area are within the bounds."""
+    return np.sqrt(np.mean(errors ** 2, axis=1)).max() <= FAITHFUL_RMS and errors.max() <= FAITHFUL_LARGEST
+
+
+def _stored(deltas: list) -> int:
+    """Numbers a GLB stores for corrective ``deltas``: three values a vertex each holds, and
+    an index a vertex for each distinct set of vertices (a component and its opposite share
+    one: facesim.export.gltf)."""
+    rows = {np.flatnonzero(np.any(d != 0, axis=1)).tobytes() for d in deltas}
+    return sum(3 * int(np.any(d != 0, axis=1).sum()) for d in deltas) + sum(len(r) // 8 for r in rows)
+
+
+def _correctives(directions: np.ndarray, coefficients: np.ndarray, moved: float) -> tuple[list, list]:
+    """The corrective shapes (N, 3) and their weight curves (frames,) of principal
+    ``directions`` (c, 3N) played with ``coefficients`` (frames, c): each scaled so its
+    weight peaks at 1, split in two (it and its opposite) where its weight changes sign,
+    holding the vertices it moves at least ``moved``, on ``CORRECTIVE_STEP``."""
+    deltas, weights = [], []
+    for direction, c in zip(directions, coefficients.T):
+        scale = np.abs(c).max()
+        for sign in (1.0, -1.0):
+            part = np.maximum(sign * c, 0.0) / max(scale, 1e-12)
+            if part.max() > 0.01:
+                delta = (sign * scale * direction).reshape(-1, 3)
+                delta[np.linalg.norm(delta, axis=1) < moved] = 0.0
+                if not delta.any():
+                    continue
+                deltas.append((np.rint(delta / CORRECTIVE_STEP) * CORRECTIVE_STEP).astype(np.float32))
+                weights.append(part)
+    return deltas, weights
+
+
+def _refitted(deltas: list, residuals) -> np.ndarray:
+    """(frames, d) the weights in [0, 1] of corrective ``deltas`` (d of (N, 3)) closest to
+    each of ``residuals`` ((N, 3) each): bounded least squares, as ``fit_weights``, since a
+    corrective cut to the vertices it holds is no longer the component it was cut from."""
+    from scipy.linalg import cho_factor, solve_triangular
+    from scipy.optimize import lsq_linear
+
+    d = np.stack(deltas).reshape(len(deltas), -1).astype(np.float64)
+    normal = d @ d.T
+    normal[np.diag_indices_from(normal)] += 1e-9 * np.trace(normal) / len(normal)
+    upper = np.triu(cho_factor(normal, lower=False)[0])
+    return np.array([lsq_linear(upper, solve_triangular(upper, d @ np.ravel(r), trans="T"), bounds=(0.0, 1.0),
+                                method="bvls").x for r in residuals]).reshape(-1, len(deltas))
 
 
 def with_correctives(shapes: Shapes, frame_at, frames: int, fit: Fit) -> tuple[Shapes, Fit]:
@@ -190,11 +246,10 @@ def with_correctives(shapes: Shapes, frame_at, frames: int, fit: Fit) -> tuple[S
     the middle of the forehead). The residual of a clip lies in few directions (happy's
     first two principal components hold 97% of it), so those are its correctives: the
     principal components of its residual over the head (from up to ``SAMPLED`` frames),
-    as many as the error bounds ``FAITHFUL_RMS`` and ``FAITHFUL_LARGEST`` need (at most
-    ``MOST_CORRECTIVES``), each scaled so its weight peaks at 1, and split in two (the
-    component and its opposite) where its weight changes sign: every weight stays in
-    [0, 1], as an engine's sliders expect; each keeps the vertices it moves at least
-    ``CORRECTIVE_MOVED``, and the fit's error is measured with them as kept. Named
+    those that bring the playback within ``FAITHFUL_RMS`` and ``FAITHFUL_LARGEST`` (at
+    most ``MOST_CORRECTIVES``) in the fewest numbers stored (``CORRECTIVE_MOVED``), every
+    weight in [0, 1] as an engine's sliders expect (``_correctives``); the fit's error is
+    measured with them as kept. Named
     ``corrective_1``, ``corrective_2``, ... (``CORRECTIVE``).
     """
     if frames == 0:
@@ -202,31 +257,30 @@ def with_correctives(shapes: Shapes, frame_at, frames: int, fit: Fit) -> tuple[S
     face = np.arange(min(FACE_AREA, len(shapes.rest)))
     sample = np.unique(np.linspace(0, frames - 1, min(frames, SAMPLED)).astype(int))
     residual = np.stack([(frame_at(k) - shapes.played(fit.weights[k])).astype(np.float32) for k in sample])
-    _, _, directions = np.linalg.svd(residual.reshape(len(sample), -1), full_matrices=False)
-    count = 0
-    while count < min(MOST_CORRECTIVES, len(directions)):
-        basis = directions[:count]
-        left = residual.reshape(len(sample), -1) - (residual.reshape(len(sample), -1) @ basis.T) @ basis
-        error = np.linalg.norm(left.reshape(residual.shape)[:, face], axis=2)
-        if np.sqrt(np.mean(error ** 2, axis=1)).max() <= FAITHFUL_RMS and error.max() <= FAITHFUL_LARGEST:
-            break
-        count += 1
-    if count == 0:
+    if _faithful(np.linalg.norm(residual[:, face], axis=2)):
         return shapes, fit
+    _, _, directions = np.linalg.svd(residual.reshape(len(sample), -1), full_matrices=False)
+    projected = residual.reshape(len(sample), -1) @ directions.T
+    best, smallest = None, np.inf
+    for count in range(1, min(MOST_CORRECTIVES, len(directions)) + 1):
+        if best is not None and count > best[0] + 1:  # one more component than the fewest faithful: enough
+            break
+        for moved in CORRECTIVE_MOVED:
+            deltas, _ = _correctives(directions[:count], projected[:, :count], moved)
+            if not deltas:
+                continue
+            left = residual - np.tensordot(_refitted(deltas, residual), np.stack(deltas), axes=1)
+            if _faithful(np.linalg.norm(left[:, face], axis=2)) and _stored(deltas) < smallest:
+                best, smallest = (count, moved), _stored(deltas)
+    if best is None:  # as faithful as MOST_CORRECTIVES make it
+        best = min(MOST_CORRECTIVES, len(directions)), CORRECTIVE_MOVED[-1]
+    count, moved = best
     basis = directions[:count].astype(np.float64)
     coefficients = np.empty((frames, count))
     for k in range(frames):
         coefficients[k] = basis @ (frame_at(k) - shapes.played(fit.weights[k])).ravel()
-    deltas, weights = [], []
-    for direction, c in zip(basis, coefficients.T):
-        scale = np.abs(c).max()
-        for sign in (1.0, -1.0):
-            part = np.maximum(sign * c, 0.0) / max(scale, 1e-12)
-            if part.max() > 0.01:
-                delta = (sign * scale * direction).reshape(-1, 3)
-                delta[np.linalg.norm(delta, axis=1) < CORRECTIVE_MOVED] = 0.0
-                deltas.append(delta.astype(np.float32))
-                weights.append(part)
+    deltas, _ = _correctives(basis, coefficients, moved)
+    weights = _refitted(deltas, (frame_at(k) - shapes.played(fit.weights[k]) for k in range(frames)))
     names = tuple(f"{CORRECTIVE}{k + 1}" for k in range(len(deltas)))
     extended = Shapes(shapes.names + names, shapes.rest, np.concatenate([shapes.deltas, np.stack(deltas)]))
-    return extended, _fit(extended, np.column_stack([fit.weights, np.column_stack(weights)]), map(frame_at, range(frames)))
+    return extended, _fit(extended, np.column_stack([fit.weights, weights]), map(frame_at, range(frames)))

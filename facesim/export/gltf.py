@@ -53,11 +53,16 @@ TURNED = 5e-3
 #: The photo's parts are drawn unlit, as facesim's photo look draws them: the photo
 #: carries its own light (lit again, the face darkened and its shading doubled in three.js).
 UNLIT = "KHR_materials_unlit"
+#: A clip's correctives are stored as normalised 16-bit integers (steps of 1/32767 m, 0.03
+#: mm: facesim.animation.blendshapes.CORRECTIVE_STEP), and their targets over the same
+#: vertices (a component and its opposite) share one list of indices: a 35-frame clip adds
+#: less to the rig than its correctives as floats did.
+QUANTIZED = "KHR_mesh_quantization"
 #: The skeleton's joints, parents first.
 JOINTS = ("neck", "head", "jaw", "eye_L", "eye_R")
 _PARENT = {"head": "neck", "jaw": "head", "eye_L": "head", "eye_R": "head"}
 
-_FLOAT, _UBYTE, _USHORT, _UINT = 5126, 5121, 5123, 5125
+_FLOAT, _UBYTE, _SHORT, _USHORT, _UINT = 5126, 5121, 5122, 5123, 5125
 _ARRAY, _ELEMENTS = 34962, 34963
 _LINEAR, _CLAMP = 9729, 33071
 
@@ -97,6 +102,7 @@ class _Binary:
         self.chunks: list[bytes] = []
         self.length = 0
         self.gltf = GLTF2()
+        self._indices: dict[bytes, int] = {}  # sparse accessors over the same rows share their indices
 
     def view(self, data: np.ndarray, target: int | None = None) -> int:
         from pygltflib import BufferView
@@ -119,24 +125,28 @@ class _Binary:
                                             type=kind, normalized=normalized or None, **extra))
         return len(self.gltf.accessors) - 1
 
-    def sparse(self, count: int, rows: np.ndarray, values: np.ndarray, bounds: bool) -> int:
-        """A VEC3 float accessor of ``count`` zeros but ``values`` at ``rows`` (glTF's sparse storage)."""
+    def sparse(self, count: int, rows: np.ndarray, values: np.ndarray, bounds: bool, quantized: bool = False) -> int:
+        """A VEC3 accessor of ``count`` zeros but ``values`` at ``rows`` (glTF's sparse
+        storage): floats or, ``quantized``, normalised 16-bit integers (KHR_mesh_quantization:
+        steps of 1/32767, ``values`` already on them)."""
         from pygltflib import Accessor, AccessorSparseIndices, AccessorSparseValues, Sparse
 
+        stored = np.rint(values * 32767).astype(np.int16) if quantized else values.astype(np.float32)
         extra = {}
         if bounds:  # over the whole accessor, its zeros included
-            low = np.minimum(values.min(axis=0, initial=0.0), 0.0) if len(rows) < count else values.min(axis=0)
-            high = np.maximum(values.max(axis=0, initial=0.0), 0.0) if len(rows) < count else values.max(axis=0)
-            extra = dict(min=low.astype(np.float32).tolist(), max=high.astype(np.float32).tolist())
+            low = np.minimum(stored.min(axis=0, initial=0), 0) if len(rows) < count else stored.min(axis=0)
+            high = np.maximum(stored.max(axis=0, initial=0), 0) if len(rows) < count else stored.max(axis=0)
+            extra = dict(min=low.tolist(), max=high.tolist())
         sparse = None
         if len(rows):
             small = count < 65536
-            indices = AccessorSparseIndices(bufferView=self.view(rows.astype(np.uint16 if small else np.uint32)),
-                                    componentType=_USHORT if small else _UINT)
-            sparse = Sparse(count=len(rows), indices=indices,
-                            values=AccessorSparseValues(bufferView=self.view(values.astype(np.float32))))
-        self.gltf.accessors.append(Accessor(byteOffset=None, componentType=_FLOAT, count=count, type="VEC3", sparse=sparse,
-                                            **extra))
+            key = rows.astype(np.uint32).tobytes()
+            if key not in self._indices:
+                self._indices[key] = self.view(rows.astype(np.uint16 if small else np.uint32))
+            indices = AccessorSparseIndices(bufferView=self._indices[key], componentType=_USHORT if small else _UINT)
+            sparse = Sparse(count=len(rows), indices=indices, values=AccessorSparseValues(bufferView=self.view(stored)))
+        self.gltf.accessors.append(Accessor(byteOffset=None, componentType=_SHORT if quantized else _FLOAT, count=count,
+                                            type="VEC3", sparse=sparse, normalized=quantized or None, **extra))
         return len(self.gltf.accessors) - 1
 
     def glb(self) -> bytes:
@@ -240,12 +250,13 @@ def rig_glb(shapes, figure, clip: Clip | None = None, name: str = "facesim head"
         delta = shapes.deltas[k].astype(np.float64)[source]
         moved = np.flatnonzero(np.linalg.norm(delta, axis=1) >= MOVED)
         turn, turned = np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-        if not shapes.names[k].startswith(CORRECTIVE):  # a clip's correctives are fractions of a millimetre: no turn
+        corrective = shapes.names[k].startswith(CORRECTIVE)
+        if not corrective:  # a clip's correctives are fractions of a millimetre: no turn
             turn = vertex_normals(rest + shapes.deltas[k], drawn)
             turn[unused] = normals[unused]
             turn = (turn - normals)[source]
             turned = np.flatnonzero(np.linalg.norm(turn, axis=1) > TURNED)
-        targets.append(g.Attributes(POSITION=out.sparse(count, moved, delta[moved] * METRES, bounds=True),
+        targets.append(g.Attributes(POSITION=out.sparse(count, moved, delta[moved] * METRES, bounds=True, quantized=corrective),
                                   NORMAL=out.sparse(count, turned, turn[turned], bounds=False)))
     photo = None
     if texture is not None:
@@ -273,6 +284,9 @@ def rig_glb(shapes, figure, clip: Clip | None = None, name: str = "facesim head"
                                _USHORT if small else _UINT, _ELEMENTS)
         primitives.append(g.Primitive(attributes=attributes, indices=indices, material=len(gltf.materials) - 1,
                                     targets=targets))
+    if any(n.startswith(CORRECTIVE) for n in shapes.names):
+        gltf.extensionsUsed.append(QUANTIZED)
+        gltf.extensionsRequired.append(QUANTIZED)
     extras = {"targetNames": list(shapes.names)}
     if texture is not None:
         extras["seams"] = source[n:].tolist()
