@@ -1,8 +1,11 @@
 """The pictures of docs/export.md (``make docs``): facesim's GLBs as other tools show
 them. Happy's and surprise's clips played by three.js in headless Chromium at their apex
 (``docs/export_threejs.png``, through tests/js/play.html), and happy's apex imported into
-Blender and rendered there (``docs/export_blender.png``, scripts/blender_still.py).
-Needs what ``make test`` installs: Debian's chromium and blender, and tests/js's packages."""
+Blender and rendered there (``docs/export_blender.png``, scripts/blender_still.py); and a
+face directory's rig (scikit-image's astronaut through `face from-photo`) with its photo,
+in three.js and in Blender, beside facesim's own photo look (``docs/export_face.png``).
+Needs what ``make test`` installs: Debian's chromium and blender, and tests/js's packages,
+and the photo extra (MediaPipe)."""
 
 from __future__ import annotations
 
@@ -50,6 +53,28 @@ def three_js(directory: Path, glb: str, seconds: float, png: Path) -> None:
         server.shutdown()
 
 
+def face_rig(scratch: Path) -> None:
+    """docs/export_face.png: the astronaut's face directory rigged (`facesim rig --face`),
+    at rest, in three.js, in Blender and in facesim's photo look, side by side."""
+    import imageio.v3 as iio
+    from skimage import data
+
+    iio.imwrite(scratch / "astronaut.png", data.astronaut())
+    facesim = [sys.executable, "-m", "facesim"]
+    subprocess.run([*facesim, "face", "from-photo", str(scratch / "astronaut.png"), "-o", str(scratch / "astronaut")], check=True)
+    subprocess.run([*facesim, "rig", "--face", str(scratch / "astronaut"), "-o", str(scratch / "astronaut.glb")], check=True)
+    three_js(scratch, "astronaut.glb", 0.0, scratch / "astronaut_three.png")
+    subprocess.run(["blender", "-b", "--factory-startup", "--python", str(ROOT / "scripts" / "blender_still.py"), "--",
+                    str(scratch / "astronaut.glb"), "0", "25", str(scratch / "astronaut_blender.png")],
+                   capture_output=True, timeout=900, check=True)
+    subprocess.run([*facesim, "render", str(ROOT / "expressions" / "happy.yaml"), "--face", str(scratch / "astronaut"),
+                    "--look", "photo", "--frame", "0", "--size", "512x512", "-o", str(scratch / "astronaut_ours.png")],
+                   check=True)
+    shots = [np.asarray(Image.open(scratch / f"astronaut_{n}.png").convert("RGB").resize((512, 512)))
+             for n in ("three", "blender", "ours")]
+    Image.fromarray(np.hstack(shots)).save(ROOT / "docs" / "export_face.png")
+
+
 def main() -> int:
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
@@ -67,7 +92,8 @@ def main() -> int:
         subprocess.run(["blender", "-b", "--factory-startup", "--python", str(ROOT / "scripts" / "blender_still.py"), "--",
                         str(scratch / "happy.glb"), str(apex_seconds["happy"]), "25", str(ROOT / "docs" / "export_blender.png")],
                        capture_output=True, timeout=900, check=True)
-    print("wrote docs/export_threejs.png and docs/export_blender.png")
+        face_rig(scratch)
+    print("wrote docs/export_threejs.png, docs/export_blender.png and docs/export_face.png")
     return 0
 
 
