@@ -144,13 +144,23 @@ LID_GAP = 0.02
 LID_THICKNESS = 0.06
 #: How far (cm, at the contour's middle, less toward the corners as sin πs) the upper and
 #: lower lids follow the eye at gaze_up and gaze_down 1: the upper lid rides the cornea's
-#: top, the lower lid its bottom, less; to either side (gaze_left/right) both slide with
-#: the globe by LOOK_SIDE. ICT's eyeLook shapes move the lids' middles up 3.4 and 1.6 mm,
-#: down 7.4 and 2.0 mm, to the side 2.2 and 2.0 mm, with eyeballs that do not turn; over
-#: facesim's eyeball turned 30 degrees down, 7.4 mm all but closed the lids (the picture
-#: read as eyes shut), 4 mm leaves the iris under the lid as a downward gaze shows it.
+#: top, the lower lid its bottom, less. ICT's eyeLook shapes move the lids' middles up 3.4
+#: and 1.6 mm, down 7.4 and 2.0 mm, to the side 2.2 and 2.0 mm, with eyeballs that do not
+#: turn; over facesim's eyeball turned 30 degrees down, 7.4 mm all but closed the lids
+#: (the picture read as eyes shut), 4 mm leaves the iris under the lid as a downward gaze
+#: shows it.
 LOOK_LIDS = ((0.34, 0.16), (-0.40, -0.12))
-LOOK_SIDE = 0.21
+#: To either side (gaze_left/right 1) the lids and the skin of the lids turn with the
+#: globe about its vertical axis, by LOOK_SIDE (cm) over the eyeball's radius (a slide of
+#: LOOK_SIDE in front of the globe), easing off to nothing LOOK_REACH eye widths beyond
+#: the opening and within LOOK_TIE eye widths of its corners, which the canthal tendons
+#: tie to the orbit. ICT's eyeLookIn_L and eyeLookOut_L do the same: the side the lids
+#: move toward goes back round the globe (1.5 mm at the outer end) and the side they
+#: leave comes forward, and the lid's skin moves with them, 2.4 mm, not only its edge.
+#: Against them (cosine, amplitude): a slide of the contour alone, spread harmonically,
+#: 0.70, 0.95; turned round the globe, 0.75-0.77; with the lids' skin turned too, 0.86-0.88,
+#: 0.95-0.96.
+LOOK_SIDE, LOOK_TIE = 0.20, 0.5
 #: The skin follows the lids' gaze out to this many eye widths around the opening (their
 #: closing reaches further: an eyelid's ``reach``). Against ICT's eyeLookUp_L at the
 #: landmarks: cosine 0.89, amplitude 1.05 (0.05-0.2 alike).
@@ -481,18 +491,31 @@ def _eyelid(mesh: FaceMesh, lid, opening: np.ndarray | None, centre: np.ndarray,
         raised = harmonic(mesh, fixed, np.concatenate([raise_upper, np.zeros_like(delta_lower), still]))
     region = np.setdiff1d(np.flatnonzero(distance <= (0.5 + lid.reach) * width), corners)
     sin_upper, sin_lower = np.sin(np.pi * s_upper), np.sin(np.pi * s_lower)
-    # the skin follows the lids' gaze less far than their closing, out to LOOK_REACH eye
-    # widths; the eye's corners stay (tied to the orbit by the canthal tendons), so the
-    # lids' slide to a side eases off toward them as sin² πs (as sin πs, the lower lid's
-    # last vertex crossed the inner corner's sliver triangle)
+    # up and down, the skin follows the lids' edges less far than their closing, out to
+    # LOOK_REACH eye widths; to a side, the lids and their skin turn with the globe
     beyond = np.setdiff1d(np.flatnonzero(distance > (0.5 + LOOK_REACH) * width), np.concatenate([contour, corners]))
     looks = []
-    for (up, low), side in zip(LOOK_LIDS + ((0.0, 0.0), (0.0, 0.0)), (0.0, 0.0, LOOK_SIDE, -LOOK_SIDE)):
-        on_upper = np.column_stack([side * sin_upper**2, up * sin_upper / upper[:, 2], np.zeros(len(sin_upper))])
-        on_lower = np.column_stack([side * sin_lower**2, low * sin_lower / lower[:, 2], np.zeros(len(sin_lower))])
+    for up, low in LOOK_LIDS:
+        on_upper = np.column_stack([np.zeros(len(sin_upper)), up * sin_upper / upper[:, 2], np.zeros(len(sin_upper))])
+        on_lower = np.column_stack([np.zeros(len(sin_lower)), low * sin_lower / lower[:, 2], np.zeros(len(sin_lower))])
         looks.append(harmonic(mesh, np.concatenate([contour, corners, beyond]),
                               np.concatenate([on_upper, on_lower, np.zeros((len(corners) + len(beyond), 3))]))[region])
+    tie = np.linalg.norm(x[region][:, None] - x[corners][None], axis=2).min(axis=1) if len(corners) else np.inf
+    turn = (LOOK_SIDE / radius * (1.0 - _smoothstep((distance[region] - 0.5 * width) / (LOOK_REACH * width)))
+            * _smoothstep(tie / (LOOK_TIE * width)))
+    looks += [_turned_about_the_globe(_cylindrical(x[region], centre), sign * turn) for sign in (1.0, -1.0)]
     return region, delta[region], raised[region], np.stack(looks, axis=1), contour
+
+
+def _turned_about_the_globe(points: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """(Δx, Δφ, Δr) of lid contour ``points`` (x, φ, r about the eyeball's horizontal axis:
+    ``_cylindrical``) turned by ``angle`` (radians, each its own) about the eyeball's
+    vertical axis: a lid sliding sideways with the globe, round it, so the side it moves
+    toward goes back and the side it leaves comes forward."""
+    dx, dy, dz = points[:, 0], points[:, 2] * np.sin(points[:, 1]), points[:, 2] * np.cos(points[:, 1])
+    x = dx * np.cos(angle) + dz * np.sin(angle)
+    z = -dx * np.sin(angle) + dz * np.cos(angle)
+    return np.column_stack([x - dx, np.arctan2(dy, z) - points[:, 1], np.hypot(dy, z) - points[:, 2]])
 
 
 def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
