@@ -200,24 +200,22 @@ def _stored(deltas: list) -> int:
     return sum(3 * int(np.any(d != 0, axis=1).sum()) for d in deltas) + sum(len(r) // 8 for r in rows)
 
 
-def _correctives(directions: np.ndarray, coefficients: np.ndarray, moved: float) -> tuple[list, list]:
-    """The corrective shapes (N, 3) and their weight curves (frames,) of principal
-    ``directions`` (c, 3N) played with ``coefficients`` (frames, c): each scaled so its
-    weight peaks at 1, split in two (it and its opposite) where its weight changes sign,
-    holding the vertices it moves at least ``moved``, on ``CORRECTIVE_STEP``."""
-    deltas, weights = [], []
+def _correctives(directions: np.ndarray, coefficients: np.ndarray, moved: float) -> list[np.ndarray]:
+    """The corrective shapes (N, 3) of principal ``directions`` (c, 3N) played with
+    ``coefficients`` (frames, c): each scaled to the largest coefficient (its weight peaks
+    at 1), split in two (it and its opposite) where its coefficient changes sign (every
+    weight in [0, 1]: ``_refitted`` finds them), holding the vertices it moves at least
+    ``moved``, on ``CORRECTIVE_STEP``."""
+    deltas = []
     for direction, c in zip(directions, coefficients.T):
         scale = np.abs(c).max()
         for sign in (1.0, -1.0):
-            part = np.maximum(sign * c, 0.0) / max(scale, 1e-12)
-            if part.max() > 0.01:
+            if np.maximum(sign * c, 0.0).max() > 0.01 * max(scale, 1e-12):
                 delta = (sign * scale * direction).reshape(-1, 3)
                 delta[np.linalg.norm(delta, axis=1) < moved] = 0.0
-                if not delta.any():
-                    continue
-                deltas.append((np.rint(delta / CORRECTIVE_STEP) * CORRECTIVE_STEP).astype(np.float32))
-                weights.append(part)
-    return deltas, weights
+                if delta.any():
+                    deltas.append((np.rint(delta / CORRECTIVE_STEP) * CORRECTIVE_STEP).astype(np.float32))
+    return deltas
 
 
 def _refitted(deltas: list, residuals) -> np.ndarray:
@@ -249,8 +247,7 @@ def with_correctives(shapes: Shapes, frame_at, frames: int, fit: Fit) -> tuple[S
     those that bring the playback within ``FAITHFUL_RMS`` and ``FAITHFUL_LARGEST`` (at
     most ``MOST_CORRECTIVES``) in the fewest numbers stored (``CORRECTIVE_MOVED``), every
     weight in [0, 1] as an engine's sliders expect (``_correctives``); the fit's error is
-    measured with them as kept. Named
-    ``corrective_1``, ``corrective_2``, ... (``CORRECTIVE``).
+    measured with them as kept. Named ``corrective_1``, ``corrective_2``, ... (``CORRECTIVE``).
     """
     if frames == 0:
         return shapes, fit
@@ -266,11 +263,11 @@ def with_correctives(shapes: Shapes, frame_at, frames: int, fit: Fit) -> tuple[S
         if best is not None and count > best[0] + 1:  # one more component than the fewest faithful: enough
             break
         for moved in CORRECTIVE_MOVED:
-            deltas, _ = _correctives(directions[:count], projected[:, :count], moved)
-            if not deltas:
+            deltas = _correctives(directions[:count], projected[:, :count], moved)
+            if not deltas or _stored(deltas) >= smallest:
                 continue
             left = residual - np.tensordot(_refitted(deltas, residual), np.stack(deltas), axes=1)
-            if _faithful(np.linalg.norm(left[:, face], axis=2)) and _stored(deltas) < smallest:
+            if _faithful(np.linalg.norm(left[:, face], axis=2)):
                 best, smallest = (count, moved), _stored(deltas)
     if best is None:  # as faithful as MOST_CORRECTIVES make it
         best = min(MOST_CORRECTIVES, len(directions)), CORRECTIVE_MOVED[-1]
@@ -279,7 +276,7 @@ def with_correctives(shapes: Shapes, frame_at, frames: int, fit: Fit) -> tuple[S
     coefficients = np.empty((frames, count))
     for k in range(frames):
         coefficients[k] = basis @ (frame_at(k) - shapes.played(fit.weights[k])).ravel()
-    deltas, _ = _correctives(basis, coefficients, moved)
+    deltas = _correctives(basis, coefficients, moved)
     weights = _refitted(deltas, (frame_at(k) - shapes.played(fit.weights[k]) for k in range(frames)))
     names = tuple(f"{CORRECTIVE}{k + 1}" for k in range(len(deltas)))
     extended = Shapes(shapes.names + names, shapes.rest, np.concatenate([shapes.deltas, np.stack(deltas)]))

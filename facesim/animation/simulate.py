@@ -253,8 +253,9 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
     unusual = identity_notice(spec.identity)  # weights the spec gives (a face directory's are its fit's)
     if notice and unusual:
         notice(f"{spec.source}: {unusual}")
-    unshown = spec.fap_drive().unshown if spec.fap else []
-    if notice and unshown:
+    faps = spec.fap_drive() if spec.fap else None
+    if notice and faps and faps.unshown:
+        unshown = faps.unshown
         notice(f"{spec.source}: fap: FAP{'s' if len(unshown) > 1 else ''} {', '.join(map(str, unshown))} "
                "move what this face has no control for (docs/mpeg4.md) and are left out")
     if notice and len(table) >= LONG_CLIP:
@@ -318,7 +319,7 @@ def simulate(spec: Spec, stop_on_inversion: bool = True, notice=None, background
         smallest_area=smallest,
         seconds=seconds,
         model=model,
-        pose=_posed(pose_table(spec) if spec.pose or (spec.fap and spec.fap_drive().pose) else None, look_table(model, table)),
+        pose=_posed(pose_table(spec) if spec.pose or (faps and faps.pose) else None, look_table(model, table)),
         face=spec.face_directory,
         progress=progress,
         muscle_force=force,

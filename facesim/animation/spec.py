@@ -508,7 +508,8 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
     - ``timeline``: key-framed curves of muscles, action units and expressions;
     - ``include``: other specs' tables (at this spec's frames and Δt) times their weights;
     - ``sequence``: expressions one after another, each reached over its transition;
-    - ``speech``: the visemes of the words said, coarticulated (facesim.speech).
+    - ``speech``: the visemes of the words said, coarticulated (facesim.speech);
+    - ``fap``: MPEG-4's FAPs through the controls that show them (facesim.animation.mpeg4).
 
     The sum is clipped to [0, 1]; below that it is linear in every weight and intensity.
     """
@@ -536,6 +537,10 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
         if path is None:
             return np.zeros(len(names))
         return activation_table(load_spec(path), muscles, _depth + 1)[-1]
+
+    def both_sides(control: str) -> list[int]:
+        """The columns of a control and of its two sides (``risorius``: ``_l`` and ``_r``)."""
+        return [names.index(n) for n in names if n in (control, f"{control}_l", f"{control}_r")]
 
     def au_vector(au: str, where: str) -> np.ndarray:
         try:
@@ -578,11 +583,11 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
     if spec.speech is not None:
         times = np.arange(frames) * spec.dt - spec.speech.start
         for control, curve in speech_curves(spec.speech.utterance, times, f"{spec.source}: speech").items():
-            both = [n for n in names if n in (control, f"{control}_l", f"{control}_r")]
-            if not both and control not in TONGUE:  # a mask has no tongue to speak with
+            columns = both_sides(control)
+            if not columns and control not in TONGUE:  # a mask has no tongue to speak with
                 fail("speech", f"the visemes need the {control.replace('_', ' ')}, which this face's muscle file "
                      "does not have")
-            table[:, [names.index(n) for n in both]] += curve[:, None]
+            table[:, columns] += curve[:, None]
 
     if spec.fap:
         drive = spec.fap_drive()
@@ -591,10 +596,10 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
             if AU_NAME.fullmatch(control):
                 table += np.outer(curve, au_vector(control, where))
                 continue
-            both = [n for n in names if n in (control, f"{control}_l", f"{control}_r")]
-            if not both:
+            columns = both_sides(control)
+            if not columns:
                 muscle_vector(control, where)  # the error: which control this face lacks
-            table[:, [names.index(n) for n in both]] += curve[:, None]
+            table[:, columns] += curve[:, None]
         for name, curve in drive.expressions.items():
             table += np.outer(curve, expression_vector(name))
 

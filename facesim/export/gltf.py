@@ -193,9 +193,8 @@ def texture_seams(figure, n: int) -> tuple[np.ndarray, np.ndarray, dict[str, np.
     own = np.r_[True, vertex[1:] != vertex[:-1]] & ~plain[vertex]
     row = np.where(own, vertex, n + np.cumsum(~own) - 1)
     source = np.concatenate([np.arange(n), vertex[~own]])
-    uv = np.zeros((len(source), 2))
-    uv[row] = pairs[:, 1:]
-    uv[:, 1] = np.where(np.isin(np.arange(len(source)), row), 1.0 - uv[:, 1], 0.0)
+    uv = np.zeros((len(source), 2))  # an untextured vertex's is unused
+    uv[row] = np.column_stack([pairs[:, 1], 1.0 - pairs[:, 2]])
     triangles, start = {}, 0
     for part in textured:
         count = part.triangles.size

@@ -503,19 +503,19 @@ def _eyelid(mesh: FaceMesh, lid, opening: np.ndarray | None, centre: np.ndarray,
     tie = np.linalg.norm(x[region][:, None] - x[corners][None], axis=2).min(axis=1) if len(corners) else np.inf
     turn = (LOOK_SIDE / radius * (1.0 - _smoothstep((distance[region] - 0.5 * width) / (LOOK_REACH * width)))
             * _smoothstep(tie / (LOOK_TIE * width)))
-    looks += [_turned_about_the_globe(_cylindrical(x[region], centre), sign * turn) for sign in (1.0, -1.0)]
+    looks += [_turned_about_the_globe(x[region], centre, sign * turn) for sign in (1.0, -1.0)]
     return region, delta[region], raised[region], np.stack(looks, axis=1), contour
 
 
-def _turned_about_the_globe(points: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """(Δx, Δφ, Δr) of lid contour ``points`` (x, φ, r about the eyeball's horizontal axis:
-    ``_cylindrical``) turned by ``angle`` (radians, each its own) about the eyeball's
-    vertical axis: a lid sliding sideways with the globe, round it, so the side it moves
-    toward goes back and the side it leaves comes forward."""
-    dx, dy, dz = points[:, 0], points[:, 2] * np.sin(points[:, 1]), points[:, 2] * np.cos(points[:, 1])
-    x = dx * np.cos(angle) + dz * np.sin(angle)
-    z = -dx * np.sin(angle) + dz * np.cos(angle)
-    return np.column_stack([x - dx, np.arctan2(dy, z) - points[:, 1], np.hypot(dy, z) - points[:, 2]])
+def _turned_about_the_globe(points: np.ndarray, centre: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """(Δx, Δφ, Δr) (``_cylindrical``'s coordinates about the eyeball's horizontal axis) of
+    ``points`` turned by ``angle`` (radians, each its own) about the vertical axis through
+    the eyeball's ``centre``: the lids and their skin sliding sideways with the globe,
+    round it, so the side they move toward goes back and the side they leave comes forward."""
+    d = points - centre
+    turned = centre + np.column_stack([d[:, 0] * np.cos(angle) + d[:, 2] * np.sin(angle), d[:, 1],
+                                       -d[:, 0] * np.sin(angle) + d[:, 2] * np.cos(angle)])
+    return _cylindrical(turned, centre) - _cylindrical(points, centre)
 
 
 def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
