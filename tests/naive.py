@@ -241,7 +241,8 @@ def rig_targets(model, activation):
 
 def pressure_forces(model, xp, activation):
     """The air in the mouth on its wall (facesim.physics.pressure): each triangle's area
-    vector ½ (X_j - X_i) × (X_k - X_i), a third to each corner at that corner's pressure."""
+    vector ½ (X_j - X_i) × (X_k - X_i), a third to each corner at that corner's pressure,
+    less the net across the face (x, y), taken from each vertex by its share of the pressure."""
     rig, out = model.rig, np.zeros_like(xp)
     if rig.pressure_column[0] < 0:
         return out
@@ -250,6 +251,8 @@ def pressure_forces(model, xp, activation):
     area = 0.5 * np.cross(xp[f[:, 1]] - xp[f[:, 0]], xp[f[:, 2]] - xp[f[:, 0]])
     for c in range(3):
         np.add.at(out, f[:, c], (p[f[:, c]] / 3)[:, None] * area)
+    if p.sum() != 0:
+        out[:, :2] -= np.outer(p / p.sum(), out[:, :2].sum(axis=0))
     return out
 
 

@@ -5,6 +5,12 @@ pressure difference p carries the force F = p ∫ n dA over its surface, n its o
 normal. The cavity's wall is the rig's ``pressure_weight`` per vertex and side
 (facesim.physics.rig: the skin over the oral cavity around the mouth, each cheek its
 side's), so one cheek can be puffed while the other's buccinator holds it (AU34_L).
+The skin is only the front of the cavity's closed wall, whose whole push nets to zero:
+what the air pushes across the face (sideways, up or down) it pushes back as hard on the
+walls across from the skin, the teeth, the palate, the floor of the mouth and a held
+cheek, which are the skull's. So the skin takes the air's push less its net across the
+face: it bulges away from the face without the whole sheet sliding toward the puffed
+side (ICT's cheekPuff_L moves the lips forward and a little toward the middle).
 """
 
 
@@ -19,9 +25,12 @@ def _pressure_forces(model, xp, control, forces):
     predicted positions, A n = ½ (X_j - X_i) × (X_k - X_i) (outward: the rig's
     ``pressure`` carries the sign of the mesh's winding), shared equally among its three
     corners, each taking p_c A n / 3 with p_c = pressure × Σ_side activation × weight of
-    that corner (the force on a membrane, F = p ∫ n dA). A follower load: its derivative
-    is not symmetric, and it adds no stiffness, so an implicit step takes it as it was at
-    the step's start (it changes slowly: the cheeks move millimetres)."""
+    that corner (the force on a membrane, F = p ∫ n dA); then the net of those forces
+    across the face (x and y) taken back from the wall's vertices in proportion to their
+    share of the pressure (the walls across from the skin are bone: the module's note). A
+    follower load: its derivative is not symmetric, and it adds no stiffness, so an
+    implicit step takes it as it was at the step's start (it changes slowly: the cheeks
+    move millimetres)."""
     left, right = model.pressure_column[0], model.pressure_column[1]
     if left < 0:
         return
@@ -29,6 +38,12 @@ def _pressure_forces(model, xp, control, forces):
     if a_left == 0.0 and a_right == 0.0:
         return
     faces, weight, force = model.faces, model.pressure_weight, forces.force
+    share = 0.0
+    for v in range(weight.shape[0]):
+        share += a_left * weight[v, 0] + a_right * weight[v, 1]
+    if share == 0.0:  # a mesh with no mouth has no cavity
+        return
+    across_x = across_y = 0.0
     for t in range(faces.shape[0]):
         i, j, k = faces[t, 0], faces[t, 1], faces[t, 2]
         if weight[i, 0] + weight[i, 1] + weight[j, 0] + weight[j, 1] + weight[k, 0] + weight[k, 1] == 0.0:
@@ -42,3 +57,9 @@ def _pressure_forces(model, xp, control, forces):
             force[corner, 0] += p * nx
             force[corner, 1] += p * ny
             force[corner, 2] += p * nz
+            across_x += p * nx
+            across_y += p * ny
+    for v in range(weight.shape[0]):
+        taken = (a_left * weight[v, 0] + a_right * weight[v, 1]) / share
+        force[v, 0] -= taken * across_x
+        force[v, 1] -= taken * across_y
