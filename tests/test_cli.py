@@ -218,7 +218,7 @@ def test_validate_info_muscles_and_sheet(tmp_path):
     result = facesim("validate", *sorted(EXPRESSIONS.glob("*.yaml")), check=0)
     assert result.stdout.count("ok: ") == len(list(EXPRESSIONS.glob("*.yaml")))
     info = facesim("info", check=0).stdout
-    assert "468 vertices, 852 triangles" in info and "40 muscles (36 linear, 4 sphincter)" in info
+    assert "468 vertices, 852 triangles" in info and "41 muscles (37 linear, 4 sphincter)" in info
     assert ("controls: jaw, jaw_thrust, jaw_sideways_l, jaw_sideways_r, lip_seal, cheek_puff_l, cheek_puff_r, mouth_left, "
             "mouth_right, lip_roll_upper, lip_roll_lower, tongue_out, tongue_up, eyelid_r, "
             "levator_palpebrae_r, gaze_up_r, gaze_down_r, gaze_left_r, gaze_right_r, pupil_dilate_r, eyelid_l, "

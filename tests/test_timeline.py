@@ -90,13 +90,23 @@ def test_mpeg4_expressions_by_name_with_intensity(tmp_path, muscles):
         table(tmp_path, muscles, expressions={"contempt": 0.5})
 
 
+def test_a_paired_muscle_named_without_its_side_drives_both_sides(tmp_path, muscles):
+    """``activations: {frontalis_galea: 0.7}``: the head has the frontalis's scalp end one a
+    side, the thesis's face one midline muscle; the same spec drives either."""
+    last = dict(zip(muscles.names, table(tmp_path, muscles, onset=0, activations={"frontalis_galea": 0.7})[-1]))
+    assert last["frontalis_galea_l"] == last["frontalis_galea_r"] == pytest.approx(0.7)
+    assert sum(v > 0 for v in last.values()) == 2
+    with pytest.raises(InputError, match="activations -> frontalis: unknown muscle"):
+        table(tmp_path, muscles, activations={"frontalis": 0.7})
+
+
 def test_action_units_drive_their_muscles_with_facs_letters(tmp_path, muscles):
     t = table(tmp_path, muscles, onset=0, aus={"AU12": "E", "AU1": "C", "AU4": 0.5})
     last = dict(zip(muscles.names, t[-1]))
     assert last["zygomaticus_major_l"] == last["zygomaticus_major_r"] == 1.0
-    assert last["frontalis_medial_l"] == last["frontalis_galea"] == pytest.approx(0.6)  # both ends of the frontalis
+    assert last["frontalis_medial_l"] == last["frontalis_galea_l"] == pytest.approx(0.6)  # both ends of the frontalis
     assert last["corrugator_supercilii_r"] == last["procerus"] == 0.5
-    assert sum(v > 0 for v in last.values()) == 2 + 3 + 3
+    assert sum(v > 0 for v in last.values()) == 2 + 4 + 3
 
 
 def test_an_action_unit_without_its_muscles_is_an_error(tmp_path, mesh):

@@ -5,7 +5,7 @@ time step. A spec is a YAML file validated by pydantic (unknown fields are error
     frames: 35                  # frames of animation, one per Δt (thesis Table 3.1)
     dt: 0.01                    # Δt per frame, seconds
     onset: 10                   # frames over which activations ease in (Parke's cosine)
-    activations:                # muscle: activation in [0, 1]
+    activations:                # muscle: activation in [0, 1]; a paired muscle's name without _l/_r drives both
       zygomaticus_major_l: 1.0
     aus: {AU12: D}              # FACS action units (facesim.animation.timeline), AU12_L one side
     arkit: {mouthSmileLeft: 0.7}   # ARKit's 52 blendshapes, ICT's spellings too (facesim.animation.arkit)
@@ -524,12 +524,15 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
         raise InputError(f"{spec.source}: {where}: {message}")
 
     def muscle_vector(name: str, where: str) -> np.ndarray:
+        """A muscle's column; a pair's name without its side (``frontalis_galea``, paired on
+        the head, one midline muscle on the thesis's face) both of its sides."""
         name = MPEG4_FAPS.get(name, name)
-        if name not in names:
+        columns = both_sides(name) if name not in names else [names.index(name)]
+        if len(columns) != (1 if name in names else 2):
             fail(where, f"{name} moves a head's tongue, and this face has none (a mask: render it on the default head)"
                  if name in TONGUE else "unknown muscle (see `facesim muscles`)")
         v = np.zeros(len(names))
-        v[names.index(name)] = 1.0
+        v[columns] = 1.0
         return v
 
     def expression_vector(name: str) -> np.ndarray:

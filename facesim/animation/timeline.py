@@ -79,7 +79,7 @@ def envelope_keys(start: float, onset: float, apex: float, offset: float, intens
 #: face does not have are errors.
 ACTION_UNITS: dict[str, tuple[str, dict[str, float]]] = {
     "AU1": ("inner brow raiser", {"frontalis_medial": 1.0, "frontalis_galea": 1.0}),
-    "AU2": ("outer brow raiser", {"frontalis_lateral": 1.0, "frontalis_outer": 1.0, "frontalis_medial": 0.2}),
+    "AU2": ("outer brow raiser", {"frontalis_lateral": 1.0, "frontalis_outer": 1.0, "frontalis_medial": 0.2, "frontalis_galea": 0.2}),
     "AU4": ("brow lowerer", {"corrugator_supercilii": 1.0, "procerus": 1.0}),
     "AU5": ("upper lid raiser", {"levator_palpebrae": 1.0}),
     "AU6": ("cheek raiser", {"malaris": 1.0, "orbicularis_oculi": 0.3}),
@@ -195,8 +195,8 @@ def apply_cooccurrence(intensity: dict[str, np.ndarray]) -> dict[str, np.ndarray
 def au_muscles(au: str, muscle_names: tuple[str, ...]) -> dict[str, float]:
     """The muscles (with sides) an AU drives on this face; an error naming what is missing.
     A one-sided unit (``AU12_L``) drives its muscles of that side (``_l``: the subject's
-    left); a midline muscle (the procerus, the frontalis over the galea), which lies
-    across both sides, at half its weight; a unit of midline muscles or the jaw alone
+    left); a midline muscle (the procerus; on the thesis's face, the frontalis over the
+    galea, which the head has one a side), which lies across both sides, at half its weight; a unit of midline muscles or the jaw alone
     (AU23's lip ring, AU26's jaw) has no one-sided form."""
     match = AU_NAME.fullmatch(au)
     if match is None or f"AU{match[1]}" not in ACTION_UNITS:

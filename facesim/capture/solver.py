@@ -53,8 +53,9 @@ TURN_LIMIT = 40.0
 #: Landmarks the pose is fitted on (MediaPipe's indices): those ARKit's 52 shapes move
 #: least on the head, at most 1.2-2.3 mm each at full weight (the nose's bridge, the
 #: eyes' corners, the temples, the face's sides at the cheekbones), where the forehead
-#: moves 4 mm and the nose's tip 7.
-RIGID = (8, 168, 6, 133, 362, 243, 463, 244, 464, 127, 356, 162, 389, 34, 264, 139, 368, 33, 263, 130, 359, 234, 454)
+#: moves 4 mm and the nose's tip 7. Not the glabella (8) or the bridge's top (168): the
+#: inner brows raise them 2.7 and 2.0 mm (ICT's AU1 raises the glabella 5 mm).
+RIGID = (6, 133, 362, 243, 463, 244, 464, 127, 356, 162, 389, 34, 264, 139, 368, 33, 263, 130, 359, 234, 454)
 #: ARKit's shapes the landmarks are solved for: all but the eyes' looks (the irises give
 #: them) and tongueOut (a face mesh has no tongue).
 SOLVED = tuple(n for n in ARKIT_52 if not n.startswith("eyeLook") and n != "tongueOut")
