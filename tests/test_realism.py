@@ -87,7 +87,7 @@ def head_figure(head_model):
 @pytest.mark.parametrize("row", [r for r in ICT_ROWS if r not in OFF_FACE])
 def test_each_unit_and_shape_matches_icts_scanned_shape(row, ict, head_model, head_figure, request):
     if row not in CALIBRATED:
-        request.applymarker(pytest.mark.xfail(strict=True, reason=f"{row} is not simulated or calibrated yet (REALISM.md)"))
+        request.applymarker(pytest.mark.xfail(strict=True, reason=f"{row} is outside the bounds still (REALISM.md)"))
     unit = row_control(row)
     assert unit.split("_")[0] in ACTION_UNITS or unit in head_model.muscles.names, f"{row} is not driven"
     held = hold_row(head_model, row, figure=head_figure)
