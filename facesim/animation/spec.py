@@ -527,8 +527,8 @@ def activation_table(spec: Spec, muscles: MuscleSet, _depth: int = 0) -> np.ndar
         """A muscle's column; a pair's name without its side (``frontalis_galea``, paired on
         the head, one midline muscle on the thesis's face) both of its sides."""
         name = MPEG4_FAPS.get(name, name)
-        columns = both_sides(name) if name not in names else [names.index(name)]
-        if len(columns) != (1 if name in names else 2):
+        columns = [names.index(name)] if name in names else both_sides(name)
+        if name not in names and len(columns) != 2:
             fail(where, f"{name} moves a head's tongue, and this face has none (a mask: render it on the default head)"
                  if name in TONGUE else "unknown muscle (see `facesim muscles`)")
         v = np.zeros(len(names))

@@ -196,8 +196,9 @@ def au_muscles(au: str, muscle_names: tuple[str, ...]) -> dict[str, float]:
     """The muscles (with sides) an AU drives on this face; an error naming what is missing.
     A one-sided unit (``AU12_L``) drives its muscles of that side (``_l``: the subject's
     left); a midline muscle (the procerus; on the thesis's face, the frontalis over the
-    galea, which the head has one a side), which lies across both sides, at half its weight; a unit of midline muscles or the jaw alone
-    (AU23's lip ring, AU26's jaw) has no one-sided form."""
+    galea, which the head has one a side), which lies across both sides, at half its
+    weight; a unit of midline muscles or the jaw alone (AU23's lip ring, AU26's jaw) has
+    no one-sided form."""
     match = AU_NAME.fullmatch(au)
     if match is None or f"AU{match[1]}" not in ACTION_UNITS:
         raise ValueError(f"unknown action unit {au!r} (known: {', '.join(ACTION_UNITS)}, each also with _L or _R)")
