@@ -6,6 +6,7 @@ against lives here, so that a reader can see them in one place and change them o
 
 import hashlib
 import os
+import threading
 from pathlib import Path
 
 #: facesim's version (pyproject.toml reads it from here).
@@ -15,13 +16,13 @@ VERSION = "0.1.0"
 #: a second process does not compile again. ``error_model="numpy"``: a division by zero
 #: gives inf or NaN, which the simulation reports with its frame (``physics.numerics._not_finite``
 #: reads the bits, which ``fastmath`` cannot fold away), instead of raising
-#: ZeroDivisionError out of a kernel.
-NUMBA_OPTIONS = dict(cache=True, nogil=True, fastmath=True, error_model="numpy")
+#: ZeroDivisionError out of a kernel. (Reached as ``NUMBA_OPTIONS``: see ``__getattr__``.)
+_NUMBA_OPTIONS = dict(cache=True, nogil=True, fastmath=True, error_model="numpy")
 #: The kernels whose loops run on several cores (``prange``): per vertex, per link in
 #: ``CHUNKS`` fixed slices of the springs, pairs and hinges, each slice scattering into
 #: its own buffer and the buffers summed per vertex in slice order (facesim.physics.numerics), so
-#: a run gives the same bits on one thread as on four.
-PARALLEL_OPTIONS = dict(NUMBA_OPTIONS, parallel=True)
+#: a run gives the same bits on one thread as on four. (Reached as ``PARALLEL_OPTIONS``.)
+_PARALLEL_OPTIONS = dict(_NUMBA_OPTIONS, parallel=True)
 CHUNKS = 2
 #: The smallest simulated mesh given every core (``numba.set_num_threads``); a smaller one
 #: runs its parallel loops on one thread, where a parallel region's start (about 1.5 µs
@@ -72,9 +73,6 @@ def _portable_target() -> None:
         return  # the user's choice, or Numba already compiled in this process for its CPU
     os.environ["NUMBA_CPU_NAME"] = "generic"  # and NUMBA_CPU_FEATURES="" with it (Numba)
     numba.config.reload_config()
-
-
-_portable_target()
 
 
 def _key_numba_cache() -> str:
@@ -142,6 +140,8 @@ def shipped_kernels_key() -> dict:
 
     import numba
 
+    _portable_target()  # the CPU this process compiles for, whether or not a kernel module was imported yet
+
     return dict(code=CODE_DIGEST, numba=numba.__version__, python=f"py{sys.version_info[0]}{sys.version_info[1]}",
                 machine=platform.machine(), cpu=numba.config.CPU_NAME)
 
@@ -181,9 +181,6 @@ def _install_shipped_kernels(folder: str) -> None:
             shutil.rmtree(unpacked)
 
 
-_install_shipped_kernels(_key_numba_cache())
-
-
 def _prefer_openmp() -> None:
     """Numba's parallel loops on OpenMP before TBB, unless the user chose a layer
     (``NUMBA_THREADING_LAYER`` or ``_PRIORITY``). Numba tries TBB first, and where the
@@ -196,7 +193,31 @@ def _prefer_openmp() -> None:
         numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
 
 
-_prefer_openmp()
+_numba_ready = threading.Lock()
+_numba_prepared = False
+
+
+def __getattr__(name: str):
+    """``NUMBA_OPTIONS`` and ``PARALLEL_OPTIONS``, Numba set up for facesim the first time
+    a module asks for them: before that module decorates its first kernel, and only in a
+    process that has kernels to compile or load. Numba is imported then, not with
+    facesim: `facesim --help` and a bad spec's error line, which run no kernel, took
+    0.36 and 0.44 s, of which importing Numba was 0.2 (0.14 and 0.25 s without it,
+    2026-12-07). Setting up: the
+    CPU's baseline (``_portable_target``), facesim's own cache folder
+    (``_key_numba_cache``) with the kernels that ship compiled in it
+    (``_install_shipped_kernels``), OpenMP's threads (``_prefer_openmp``)."""
+    options = {"NUMBA_OPTIONS": _NUMBA_OPTIONS, "PARALLEL_OPTIONS": _PARALLEL_OPTIONS}
+    if name not in options:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    global _numba_prepared
+    with _numba_ready:
+        if not _numba_prepared:
+            _portable_target()
+            _install_shipped_kernels(_key_numba_cache())
+            _prefer_openmp()
+            _numba_prepared = True
+    return options[name]
 
 
 def _data(name: str) -> Path:

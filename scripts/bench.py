@@ -1226,7 +1226,7 @@ def main() -> int:
     text, head_figures = head([64] if quick else [256, 512], 1 if quick else 7)
     section("The default head (ICT FaceKit), happy", text)
 
-    text, memory = long_clip_memory(30 if quick else 300, 600 if quick else 30_000, 32 if quick else 128)
+    text, memory = long_clip_memory(30 if quick else 300, 240 if quick else 30_000, 32 if quick else 128)
     section("Memory: a long clip streamed to MP4", text + "\n\nEach a fresh `facesim render` under a parent of its own; "
             "`facesim render` simulates a video's frames into a ring of 8 and draws each as it comes "
             "(facesim.animation.simulate, `stream=True`), so the positions of the whole clip are never held.")

@@ -63,4 +63,4 @@ def test_bench_quick_prints_every_table_with_sensible_figures(tmp_path):
         assert render["ours"] > 0 and render["floor"] > 0
     for head in f["head"].values():
         assert head["fps"] > 0 and head["fps_plain"] > 0
-    assert set(f["memory"]) == {"30", "600"} and all(50 < peak < 4000 and wall > 0 for peak, wall in f["memory"].values())
+    assert set(f["memory"]) == {"30", "240"} and all(50 < peak < 4000 and wall > 0 for peak, wall in f["memory"].values())

@@ -216,8 +216,11 @@ def test_a_force_term_is_one_kernel_and_one_line(compiled_copy):
     assert np.isfinite(with_gravity)
 
 
-CALLEE = "from numba import njit\n\n\n@njit(cache=True)\ndef weight():\n    return {}\n"
-CALLER = "from numba import njit\n\nfrom .callee import weight\n\n\n@njit(cache=True)\ndef total():\n    return 2.0 * weight()\n"
+#: Two kernels declared as facesim's are (their options from facesim.config, which keys
+#: their cache by facesim's code when a module first asks for them).
+CALLEE = "from numba import njit\n\nfrom ...config import NUMBA_OPTIONS\n\n\n@njit(**NUMBA_OPTIONS)\ndef weight():\n    return {}\n"
+CALLER = ("from numba import njit\n\nfrom ...config import NUMBA_OPTIONS\nfrom .callee import weight\n\n\n"
+          "@njit(**NUMBA_OPTIONS)\ndef total():\n    return 2.0 * weight()\n")
 
 
 def test_a_changed_kernel_is_compiled_again_in_the_kernels_that_call_it(tmp_path):
@@ -235,7 +238,7 @@ def test_a_changed_kernel_is_compiled_again_in_the_kernels_that_call_it(tmp_path
     # old size, passes Python's check of a .pyc (whole seconds and size) and its old code
     # ran (CI: totals [2.0, 2.0]); what is under test is Numba's cache, not Python's
     env = dict(os.environ, PYTHONPATH=str(tmp_path), NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
-    command = [sys.executable, "-c", "import facesim.config; from facesim.physics.toy.caller import total; print(total())"]
+    command = [sys.executable, "-c", "from facesim.physics.toy.caller import total; print(total())"]
 
     totals = []
     for weight in ("1.0", "5.0"):
@@ -245,3 +248,30 @@ def test_a_changed_kernel_is_compiled_again_in_the_kernels_that_call_it(tmp_path
         totals.append(float(result.stdout.split()[-1]))
     assert totals == [2.0, 10.0]
     assert any((tmp_path / "cache").rglob("caller.total-*.nbi"))  # the caller was cached, in the cache given
+
+
+def test_a_command_that_runs_no_kernel_does_not_import_numba(tmp_path):
+    """`facesim --help` and a bad spec's one-line error import no Numba (0.2 s of their
+    0.36-0.44 s): facesim sets Numba up when a module with kernels first asks for its
+    options (facesim.config.__getattr__), and then for the CPU's baseline and facesim's
+    own cache, as before any kernel is decorated."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("frames: -3\n")
+    code = textwrap.dedent("""
+        import sys
+        from facesim.cli import app
+        for argv in (["--help"], ["render", sys.argv[1]]):
+            try:
+                app(argv, prog_name="facesim")
+            except SystemExit as exit:
+                print("exit", exit.code)
+        print("numba imported:", "numba" in sys.modules)
+        import facesim.physics.springs, numba
+        print("compiles for:", numba.config.CPU_NAME)
+    """)
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES")}
+    result = subprocess.run([sys.executable, "-c", code, str(bad)], capture_output=True, text=True, env=env, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    lines = result.stdout.splitlines()
+    assert "exit 0" in lines and "exit 2" in lines and "frames" in result.stderr  # the help, then the spec's error
+    assert "numba imported: False" in lines and lines[-1] == "compiles for: generic"
