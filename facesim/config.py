@@ -197,19 +197,13 @@ _numba_ready = threading.Lock()
 _numba_prepared = False
 
 
-def __getattr__(name: str):
-    """``NUMBA_OPTIONS`` and ``PARALLEL_OPTIONS``, Numba set up for facesim the first time
-    a module asks for them: before that module decorates its first kernel, and only in a
-    process that has kernels to compile or load. Numba is imported then, not with
-    facesim: `facesim --help` and a bad spec's error line, which run no kernel, took
-    0.36 and 0.44 s, of which importing Numba was 0.2 (0.14 and 0.25 s without it,
-    2026-12-07). Setting up: the
-    CPU's baseline (``_portable_target``), facesim's own cache folder
-    (``_key_numba_cache``) with the kernels that ship compiled in it
-    (``_install_shipped_kernels``), OpenMP's threads (``_prefer_openmp``)."""
-    options = {"NUMBA_OPTIONS": _NUMBA_OPTIONS, "PARALLEL_OPTIONS": _PARALLEL_OPTIONS}
-    if name not in options:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+def prepare_numba() -> None:
+    """Set Numba up for facesim, once per process, before it compiles, loads or runs
+    anything of facesim's: the CPU's baseline (``_portable_target``), facesim's own cache
+    folder (``_key_numba_cache``) with the kernels that ship compiled in it
+    (``_install_shipped_kernels``), OpenMP's threads before TBB's (``_prefer_openmp``:
+    before the first parallel loop or ``numba.set_num_threads`` starts the threads).
+    Called for a module's kernels by ``__getattr__``, and by facesim.workers."""
     global _numba_prepared
     with _numba_ready:
         if not _numba_prepared:
@@ -217,6 +211,17 @@ def __getattr__(name: str):
             _install_shipped_kernels(_key_numba_cache())
             _prefer_openmp()
             _numba_prepared = True
+
+
+def __getattr__(name: str):
+    """``NUMBA_OPTIONS`` and ``PARALLEL_OPTIONS``, after ``prepare_numba``: Numba is set up
+    the first time a module asks for its kernels' options, so a process that runs no
+    kernel never imports it. `facesim --help` and a bad spec's error line took 0.36 and
+    0.44 s, 0.2 s of it importing Numba; 0.14 and 0.25 s without (2026-12-07)."""
+    options = {"NUMBA_OPTIONS": _NUMBA_OPTIONS, "PARALLEL_OPTIONS": _PARALLEL_OPTIONS}
+    if name not in options:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    prepare_numba()
     return options[name]
 
 

@@ -46,6 +46,9 @@ def share_the_cores(processes: int) -> None:
     of CPU on two cores, 9.9-10.4 s and 16-17 s with a thread each (2026-12-06)."""
     import numba
 
+    from .config import prepare_numba
+
+    prepare_numba()  # the threads this starts are OpenMP's, as a kernel's would be
     numba.set_num_threads(max(1, min(numba.config.NUMBA_NUM_THREADS, available_cores() // processes)))
 
 

@@ -742,6 +742,30 @@ def test_stdout_carries_nothing_facesim_did_not_mean(tmp_path):
     assert "Unable to join threads" in forking(NUMBA_THREADING_LAYER_PRIORITY="tbb omp workqueue").stdout
 
 
+def test_a_pools_worker_starts_openmps_threads_too():
+    """A worker of `batch --jobs` or `dataset` sets its thread count (facesim.workers.
+    share_the_cores) before it imports any kernel, which starts Numba's threads: they
+    are OpenMP's, as a kernel's would be (facesim.config.prepare_numba; when Numba was
+    first set up by a kernel module alone, such a worker started TBB's, whose pool writes
+    on stdout at each fork), and preferring TBB again shows the test can tell."""
+    import importlib.util
+
+    if importlib.util.find_spec("tbb") is None and not (Path(sys.prefix) / "lib" / "libtbb.so.12").exists():
+        pytest.skip("TBB is not installed (the test extra installs it)")
+    env = dict(os.environ, LD_LIBRARY_PATH=str(Path(sys.prefix) / "lib"))
+    env.pop("NUMBA_THREADING_LAYER", None)
+    code = "from facesim.workers import share_the_cores; share_the_cores(2); import numba; print(numba.threading_layer())"
+
+    def layer(**changes):
+        result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=dict(env, **changes),
+                                timeout=120)
+        assert result.returncode == 0, result.stderr[-2000:]
+        return result.stdout.split()[-1]
+
+    assert layer() == "omp"
+    assert layer(NUMBA_THREADING_LAYER_PRIORITY="tbb omp workqueue") == "tbb"
+
+
 def test_a_long_clip_is_announced_from_its_measured_speed(monkeypatch):
     """`frames: 100000` on the head: the estimate assumed a rate the head does not reach
     (23 s predicted, 156 s taken). Now a long clip's first frames are timed on the face at
