@@ -99,15 +99,17 @@ def _key_numba_cache() -> str:
 
     from .cache import directory
 
-    folder = f"numba-{CODE_DIGEST[:16]}"
+    # fixed when Numba is set up: a kernel made later in the process (a serial twin,
+    # facesim.physics.twins) is kept beside the others whatever FACESIM_CACHE says by then
+    # (a test that points it elsewhere for its own files had a twin compiled there, 47-60 s)
+    root = os.path.join(numba.config.CACHE_DIR or os.fspath(directory()), f"numba-{CODE_DIGEST[:16]}")
     provided = getattr(caching, "UserProvidedCacheLocator", None) or caching._UserProvidedCacheLocator
 
     class CodeKeyedLocator(provided):
         def __init__(self, py_func, py_file):
             super().__init__(py_func, py_file)
             # one folder per subpackage: a file's kernels are indexed by its name alone
-            subpackage = Path(py_file).resolve().parent.relative_to(PACKAGE_DIR)
-            self._cache_path = os.path.join(numba.config.CACHE_DIR or os.fspath(directory()), folder, subpackage)
+            self._cache_path = os.path.join(root, Path(py_file).resolve().parent.relative_to(PACKAGE_DIR))
 
         def get_source_stamp(self):
             return CODE_DIGEST
@@ -123,7 +125,7 @@ def _key_numba_cache() -> str:
     implementation = getattr(caching, "CacheImpl", None) or caching._CacheImpl
     implementation._locator_classes = [CodeKeyedLocator] + [
         c for c in implementation._locator_classes if c.__name__ != "CodeKeyedLocator"]
-    return os.path.join(numba.config.CACHE_DIR or os.fspath(directory()), folder)
+    return root
 
 
 #: The kernels compiled ahead, shipped inside the package (scripts/build_kernels.py):

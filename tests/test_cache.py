@@ -2,6 +2,9 @@
 recomputed when an entry is damaged, skipped when it cannot be written."""
 
 import os
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 
@@ -132,3 +135,25 @@ def test_the_heads_preconditioner_read_from_the_cache_is_the_factorised_one(tmp_
         assert a.dtype == b.dtype and np.array_equal(a, b)
     model.preconditioner(h / 2)
     assert len(list(tmp_path.glob("preconditioner-*.npz"))) == 2
+
+
+def test_kernels_made_later_in_a_process_are_kept_with_the_others(tmp_path):
+    """facesim's kernel folder is fixed when Numba is set up (facesim.config._key_numba_cache):
+    a kernel module imported, or a serial twin made, after FACESIM_CACHE changes is cached
+    beside the others, not in the new folder (a test pointing FACESIM_CACHE at its own files
+    had a twin compiled there, and the suite's next user of it waited 47-60 s)."""
+    code = textwrap.dedent("""
+        import os, sys
+        import facesim.physics.springs  # Numba set up for facesim: its kernels' folder
+        os.environ["FACESIM_CACHE"] = sys.argv[1]
+        from numba.core.registry import CPUDispatcher
+        from facesim.renderer import filters
+        kernel = next(v for v in vars(filters).values() if isinstance(v, CPUDispatcher))
+        print(kernel._cache._cache_path)
+    """)
+    env = {k: v for k, v in os.environ.items() if k not in ("FACESIM_CACHE", "NUMBA_CACHE_DIR")}
+    result = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, env=env,
+                            timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    path = result.stdout.split()[-1]
+    assert not path.startswith(str(tmp_path)) and "numba-" in path

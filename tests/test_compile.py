@@ -149,6 +149,19 @@ def test_a_new_users_first_render_loads_every_kernel_it_runs_and_compiles_none(t
 
 
 @pytest.mark.skipif(not SHIPPABLE, reason="the kernels ship compiled for x86-64 and Python 3.11")
+def test_a_new_users_first_words_over_an_expression_compile_nothing(tmp_path):
+    """Words said over a smile: the jaw carries the skin as the smile shapes it, a rest
+    shape rewritten each frame (facesim.physics.run). Handed to the kernels writable, it
+    was a new type to Numba, and a new machine's first such render compiled every kernel
+    again (47-60 s in the suite); read-only, as the model's own arrays, it loads them."""
+    spec = tmp_path / "smiling_words.yaml"
+    spec.write_text("name: smiling words\ninclude: [{spec: happy}]\nspeech: {text: Bob made a map.}\n")
+    counts = render_counts(tmp_path, True, str(spec))
+    assert not {name for name, (hits, misses, _) in counts.items() if misses}  # nothing compiled
+    assert counts["facesim.physics.solver._simulate__serial"][0] >= 1
+
+
+@pytest.mark.skipif(not SHIPPABLE, reason="the kernels ship compiled for x86-64 and Python 3.11")
 def test_a_large_meshs_first_render_loads_the_parallel_kernels_and_compiles_none(tmp_path):
     """A mesh of at least PARALLEL_FROM vertices (the Hopper face subdivided twice, 6,990)
     runs the physics' parallel kernels, which ship compiled too: its first render on a

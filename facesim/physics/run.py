@@ -131,7 +131,13 @@ def run(
     n = model.vertex_count
     shaped = None if shaping is None else shaped_by_the_muscles(model, activations, shaping, dt, source, threads)
     if shaped is not None:  # the rest positions a frame's rig reads, the held rows rewritten each frame
-        shaped = (*shaped, np.array(model.arrays.rest_position))
+        rest = np.array(model.arrays.rest_position)
+        # handed to the kernels read-only, as the model's own arrays are: a writable array is
+        # another type to Numba, and every kernel was compiled again for it (about 50 s, the
+        # first time a spec spoke over an expression on a machine)
+        frozen = rest.view()
+        frozen.setflags(write=False)
+        shaped = (*shaped, rest, frozen)
     state = layout.State(np.array(model.arrays.rest_position), np.zeros((n, 3)))  # the kernels' vertex order (Model)
     out = diagnostics(frames, n) if out is None else out
     ring = len(out.positions) < frames  # a streamed run: a few frames' room, reused in turn
@@ -164,9 +170,9 @@ def run(
             rows = out.positions[first:first + stop - start]
             arrays = model.arrays
             if shaped is not None:  # where the jaw takes its skin: the rest shape the muscles made this frame
-                held, offset, rest = shaped
+                held, offset, rest, frozen = shaped
                 rest[held] = model.arrays.rest_position[held] + offset[start]
-                arrays = arrays._replace(rest_position=rest)
+                arrays = arrays._replace(rest_position=frozen)
             status, frame, element = simulate(
                 arrays, table, start, stop, float(dt), substeps, energy_limit,
                 stop_on_inversion, state, control, work, forces, factor,
