@@ -126,6 +126,11 @@ def render_counts(tmp_path, shipped: bool, spec: str = "expressions/happy.yaml",
     return json.loads(result.stdout.splitlines()[-1])
 
 
+def compiled(counts: dict) -> set:
+    """The kernels a run compiled (a cache miss), by name, from ``render_counts``."""
+    return {name for name, (hits, misses, _) in counts.items() if misses}
+
+
 @pytest.mark.skipif(not SHIPPABLE, reason="the kernels ship compiled for x86-64 and Python 3.11")
 def test_the_shipped_kernels_are_compiled_from_this_code():
     """facesim/compiled holds kernels of this very code, Numba, Python and machine, for
@@ -141,7 +146,7 @@ def test_the_shipped_kernels_are_compiled_from_this_code():
 def test_a_new_users_first_render_loads_every_kernel_it_runs_and_compiles_none(tmp_path):
     counts = render_counts(tmp_path, shipped=True)
     loaded = {name for name, (hits, misses, _) in counts.items() if hits}
-    assert not {name for name, (hits, misses, _) in counts.items() if misses}  # nothing compiled
+    assert not compiled(counts)  # nothing compiled
     assert "facesim.physics.solver._simulate__serial" in loaded and "facesim.geometry._vertex_normals" in loaded
     # the head's 468-vertex skin runs the twins: no parallel kernel of the physics is touched
     assert not {name for name in loaded if name.startswith("facesim.physics") and counts[name][2]}
@@ -157,7 +162,7 @@ def test_a_new_users_first_words_over_an_expression_compile_nothing(tmp_path):
     spec = tmp_path / "smiling_words.yaml"
     spec.write_text("name: smiling words\ninclude: [{spec: happy}]\nspeech: {text: Bob made a map.}\n")
     counts = render_counts(tmp_path, True, str(spec))
-    assert not {name for name, (hits, misses, _) in counts.items() if misses}  # nothing compiled
+    assert not compiled(counts)  # nothing compiled
     assert counts["facesim.physics.solver._simulate__serial"][0] >= 1
 
 
@@ -170,7 +175,7 @@ def test_a_large_meshs_first_render_loads_the_parallel_kernels_and_compiles_none
 
     mesh, muscles = subdivision(tmp_path, 2)
     counts = render_counts(tmp_path, True, "expressions/happy.yaml", "--mesh", mesh, "--muscles", muscles)
-    assert not {name for name, (hits, misses, _) in counts.items() if misses}  # nothing compiled
+    assert not compiled(counts)  # nothing compiled
     assert counts["facesim.physics.solver._simulate"][:2] == [1, 0]  # the variant that calls the parallel kernels
     assert "facesim.physics.muscle_forces._muscle_frame" in {
         name for name, (hits, _, parallel) in counts.items() if hits and parallel}
@@ -203,13 +208,13 @@ def test_with_no_compiled_kernels_a_render_compiles_only_the_kernels_it_runs(com
     same kernels the shipped ones hand a new user. (The package compiled is the copy
     with gravity: its term compiled with the solver that calls it.)"""
     counts, _ = compiled_copy
-    compiled = {name for name, (hits, misses, _) in counts.items() if misses}
+    compiled_now = compiled(counts)
     assert not {name for name, (hits, misses, _) in counts.items() if hits}
-    physics = {name for name in compiled if name.startswith("facesim.physics")}
+    physics = {name for name in compiled_now if name.startswith("facesim.physics")}
     assert "facesim.physics.solver._simulate__serial" in physics and "facesim.physics.gravity._gravity_forces" in physics
     assert not {name for name in physics if counts[name][2]}  # no parallel variant
     assert "facesim.physics.solver._simulate" not in counts or counts["facesim.physics.solver._simulate"][1] == 0
-    assert not {name for name in compiled if name.startswith("facesim.face.bake")}
+    assert not {name for name in compiled_now if name.startswith("facesim.face.bake")}
     # every kernel compiled is one the run called: a kernel called by another is compiled
     # with it (Numba's statistics count it), and none is compiled ahead (no signatures)
     never_called = {name for name, (hits, misses, _) in counts.items() if not hits and not misses}

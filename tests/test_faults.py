@@ -717,19 +717,27 @@ while running.is_alive():  # forked as ffmpeg is: with the fork handlers (Python
 """
 
 
-def test_stdout_carries_nothing_facesim_did_not_mean(tmp_path):
-    """With TBB installed, Numba's pool wrote "Unable to join threads to shut down before
-    fork()" on stdout when a process forked (ffmpeg for every MP4) while a parallel
-    kernel ran on another thread. facesim prefers OpenMP (facesim.config._prefer_openmp):
-    a render's stdout is empty, and so is that of a process forking while facesim's
-    parallel kernels run beside it; asked to prefer TBB again, the noise is back, so this
-    test can tell."""
+@pytest.fixture()
+def tbb_env():
+    """This environment with TBB's library found and no threading layer chosen, so that
+    Numba picks by its priority; skipped where TBB is not installed."""
     import importlib.util
 
     if importlib.util.find_spec("tbb") is None and not (Path(sys.prefix) / "lib" / "libtbb.so.12").exists():
         pytest.skip("TBB is not installed (the test extra installs it)")
     env = dict(os.environ, LD_LIBRARY_PATH=str(Path(sys.prefix) / "lib"))
     env.pop("NUMBA_THREADING_LAYER", None)
+    return env
+
+
+def test_stdout_carries_nothing_facesim_did_not_mean(tmp_path, tbb_env):
+    """With TBB installed, Numba's pool wrote "Unable to join threads to shut down before
+    fork()" on stdout when a process forked (ffmpeg for every MP4) while a parallel
+    kernel ran on another thread. facesim prefers OpenMP (facesim.config._prefer_openmp):
+    a render's stdout is empty, and so is that of a process forking while facesim's
+    parallel kernels run beside it; asked to prefer TBB again, the noise is back, so this
+    test can tell."""
+    env = tbb_env
     quiet = facesim("render", "happy", "-o", tmp_path / "a.mp4", "--size", "32x32", env=env, check=0)
     assert quiet.stdout == ""
 
@@ -742,18 +750,13 @@ def test_stdout_carries_nothing_facesim_did_not_mean(tmp_path):
     assert "Unable to join threads" in forking(NUMBA_THREADING_LAYER_PRIORITY="tbb omp workqueue").stdout
 
 
-def test_a_pools_worker_starts_openmps_threads_too():
+def test_a_pools_worker_starts_openmps_threads_too(tbb_env):
     """A worker of `batch --jobs` or `dataset` sets its thread count (facesim.workers.
     share_the_cores) before it imports any kernel, which starts Numba's threads: they
     are OpenMP's, as a kernel's would be (facesim.config.prepare_numba; when Numba was
     first set up by a kernel module alone, such a worker started TBB's, whose pool writes
     on stdout at each fork), and preferring TBB again shows the test can tell."""
-    import importlib.util
-
-    if importlib.util.find_spec("tbb") is None and not (Path(sys.prefix) / "lib" / "libtbb.so.12").exists():
-        pytest.skip("TBB is not installed (the test extra installs it)")
-    env = dict(os.environ, LD_LIBRARY_PATH=str(Path(sys.prefix) / "lib"))
-    env.pop("NUMBA_THREADING_LAYER", None)
+    env = tbb_env
     code = "from facesim.workers import share_the_cores; share_the_cores(2); import numba; print(numba.threading_layer())"
 
     def layer(**changes):
