@@ -20,6 +20,12 @@ from ..config import NUMBA_OPTIONS
 
 
 @njit(**NUMBA_OPTIONS)
+def _share(weight, v, a_left, a_right):
+    """Vertex v's share of the pressure: Σ_side activation × its weight on that side."""
+    return a_left * weight[v, 0] + a_right * weight[v, 1]
+
+
+@njit(**NUMBA_OPTIONS)
 def _pressure_forces(model, xp, control, forces):
     """The pressure in the mouth on its wall: each triangle's area vector at the
     predicted positions, A n = ½ (X_j - X_i) × (X_k - X_i) (outward: the rig's
@@ -40,7 +46,7 @@ def _pressure_forces(model, xp, control, forces):
     faces, weight, force = model.faces, model.pressure_weight, forces.force
     share = 0.0
     for v in range(weight.shape[0]):
-        share += a_left * weight[v, 0] + a_right * weight[v, 1]
+        share += _share(weight, v, a_left, a_right)
     if share == 0.0:  # a mesh with no mouth has no cavity
         return
     across_x = across_y = 0.0
@@ -53,13 +59,13 @@ def _pressure_forces(model, xp, control, forces):
         nx, ny, nz = 0.5 * (uy * vz - uz * vy), 0.5 * (uz * vx - ux * vz), 0.5 * (ux * vy - uy * vx)
         for c in range(3):
             corner = faces[t, c]
-            p = model.pressure * (a_left * weight[corner, 0] + a_right * weight[corner, 1]) / 3.0
+            p = model.pressure * _share(weight, corner, a_left, a_right) / 3.0
             force[corner, 0] += p * nx
             force[corner, 1] += p * ny
             force[corner, 2] += p * nz
             across_x += p * nx
             across_y += p * ny
     for v in range(weight.shape[0]):
-        taken = (a_left * weight[v, 0] + a_right * weight[v, 1]) / share
+        taken = _share(weight, v, a_left, a_right) / share
         force[v, 0] -= taken * across_x
         force[v, 1] -= taken * across_y
