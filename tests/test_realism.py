@@ -50,7 +50,7 @@ CALIBRATED = {"AU1", "AU2", "AU4", "AU5", "AU6", "AU7", "AU9", "AU10", "AU11", "
               "mouthStretch_L", "mouthStretch_R", "mouthUpperUp_L", "mouthUpperUp_R", "noseSneer_L", "noseSneer_R",
               "eyeLookUp_L", "eyeLookUp_R", "eyeLookDown_L", "eyeLookDown_R", "eyeLookIn_L", "eyeLookIn_R", "eyeLookOut_L",
               "eyeLookOut_R", "mouthLeft", "mouthRight", "mouthSmile_L",
-              "mouthSmile_R", "mouthRollUpper", "mouthRollLower", "cheekPuff_L", "cheekPuff_R", "browInnerUp_L", "browInnerUp_R"}
+              "mouthSmile_R", "mouthRollUpper", "mouthRollLower", "cheekPuff_L", "cheekPuff_R", "browInnerUp_L", "browInnerUp_R", "mouthClose"}
 #: Gaze shapes are held to the lids' direction alone (issue 46): their amplitude over the
 #: face area is the head's follow spreading a lid landmark's motion (at the landmarks,
 #: looking up or down moves the lids 1.05-1.10 of ICT's), and ICT's eyeballs do not turn.

@@ -397,8 +397,15 @@ def head_figure(head: Head, model) -> Figure:
     teeth_components = _components(head.triangles_of("M_Teeth"), teeth)
     for rows in teeth_components:  # a tooth is rigid: upper or lower as a whole
         weight[np.isin(lower_rows, rows)] = float(x[rows, 1].mean() < np.mean([x[r, 1].mean() for r in teeth_components]))
+    # The socket's lining turns with the mandible in the mouth's depth; nearer the lips, only
+    # as far as the skin does not already carry it (its follow rows): turned there and
+    # carried too, the lining in front of the lower incisors went down with them twice over
+    # and hid them (happy with the jaw open: 392 -> 74 pixels of teeth).
     socket_part = np.isin(lower_rows, mouth)
-    weight[socket_part] *= np.isin(lower_rows[socket_part], deep_mouth)
+    shallow = socket_part & ~np.isin(lower_rows, deep_mouth)
+    followed = np.zeros(len(x))
+    followed[follow_rows] = np.asarray(follow.sum(axis=1)).ravel()
+    weight[shallow] *= np.clip(1.0 - followed[lower_rows[shallow]], 0.0, 1.0)
     tongue = tongue_rig(x, _tongue_rows(head))  # on the floor of the mouth: all of it that its rig moves turns with the mandible
     in_tongue = np.isin(lower_rows, tongue.rows)
     weight[in_tongue] = np.maximum(weight[in_tongue], np.clip((x[lower_rows[in_tongue], 2] - TONGUE_ROOT + 2.0) / 2.0, 0, 1))

@@ -115,9 +115,15 @@ class Jaw(_Contours):
     with a weight interpolated smoothly between them (facesim.physics.rig). The two lists pair
     up, upper over lower: the lips' contacts, which meet across a plane turned
     ``contact_tilt`` degrees from the horizontal, its normal leaning back (facesim.physics.rig):
-    the lower lip pushed up slides forward over the upper one."""
+    the lower lip pushed up slides forward over the upper one. The joints lie
+    ``hinge_depth`` behind the two hinge points (a fraction of the distance between them,
+    straight back in the horizontal plane): named by landmark, the points are on the
+    skin, where a face's contour passes the joints' height, and the condyles sit deeper,
+    in front of the ears."""
 
     hinge: tuple[Point, Point]
+    hinge_depth: float = Field(0.0, ge=0, le=0.5, description="how far behind the hinge points the temporomandibular "
+                               "joints lie, as a fraction of the distance between the points (0: at them)")
     max_angle: float = Field(20.0, gt=0, le=45)
     # a grown mandible protrudes 7-10 mm and moves 8-12 mm to either side (clinical
     # norms); ICT's jawForward carries the lower incisors 9 mm, its jawLeft 7.4 mm
@@ -300,8 +306,12 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         where = f"{source}: jaw"
         hinge = np.array([mesh.vertices[_snap(p, mesh, f"{where}: hinge")] if isinstance(p, int) else p
                           for p in spec.jaw.hinge], dtype=np.float64)  # a point may lie inside the head
-        if np.linalg.norm(hinge[1] - hinge[0]) < 0.1 * width:
+        span = float(np.linalg.norm(hinge[1] - hinge[0]))
+        if span < 0.1 * width:
             raise InputError(f"{where}: hinge: its two points must lie on either side of the face")
+        axis = (hinge[1] - hinge[0]) / span
+        forward = np.array([0.0, 0.0, 1.0]) - axis[2] * axis  # in the horizontal plane, as the jaw glides (rig)
+        hinge = hinge - spec.jaw.hinge_depth * span * forward / np.linalg.norm(forward)
         upper = np.array([_snap(p, mesh, f"{where}: upper") for p in spec.jaw.upper], dtype=np.int64)
         lower = np.array([_snap(p, mesh, f"{where}: lower", below=u) for p, u in zip(spec.jaw.lower, upper)], dtype=np.int64)
         _upper_over_lower(mesh, upper, lower, where)

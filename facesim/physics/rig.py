@@ -17,7 +17,7 @@ acting on top.
   subject's left or right), so the mandible is a rigid body with translation, not a
   hinge alone. The lips sealed over the open jaw (``lip_seal``, ARKit's mouthClose: the
   orbicularis oris holding the lips together while the jaw drops, as for /p b m/ spoken
-  open) turn with the weight w' = w + s Δw (their glide keeps w), Δw = -w on the lips and the corners, harmonic
+  open) turn with the weight w' = w + s Δw (their glide keeps w), Δw = -w on the lips and the skin around their corners, harmonic
   out to zero at the rim and above the hinge: the lower lip stays with the upper one and
   the skin over the chin stretches between it and the jaw (ICT's mouthClose on top of
   jawOpen: the lower lip back up 3.6 cm, the chin's skin less the further down). The lips
@@ -119,6 +119,12 @@ JAW_WEDGE = 0.3
 #: opening's leftmost or rightmost vertex and any vertex within JAW_CORNER_SIZE mouth widths.
 JAW_CORNER = 0.42
 JAW_CORNER_SIZE = 0.025
+#: Sealed over the open jaw (mouthClose), the lips turn back with the skin within this
+#: many mouth widths of each corner: the seal's change Δw is fixed there, not left to the
+#: harmonic fill, which let the corner's sliver triangles (61-76-184 on the default face)
+#: fold over under the upper lip's roll and the seal together (0.06 still folds one; 0.09
+#: folds the next ring's).
+JAW_SEAL_CORNER = 0.075
 #: The skin over the mandible is held to it with this share of ``Material.drive`` times
 #: its jaw weight while the jaw is open: bone under the chin, soft tissue in the cheeks.
 JAW_DRIVE = 0.5
@@ -314,6 +320,9 @@ def _jaw(mesh: FaceMesh, muscles: MuscleSet):
     fixed, first = np.unique(fixed, return_index=True)  # the lips win over the rules after them
     weight = np.clip(harmonic(mesh, fixed, value[first, None])[:, 0], 0.0, 1.0)
     lips_and_corners = np.union1d(lips, corners)
+    if len(corners):  # sealed, the skin around each corner stays with the lips (JAW_SEAL_CORNER)
+        around = np.linalg.norm(x[:, None] - x[None, corners], axis=2).min(axis=1) < JAW_SEAL_CORNER * width
+        lips_and_corners = np.union1d(lips_and_corners, np.flatnonzero(around))
     still = np.setdiff1d(fixed, lips_and_corners)  # the rim and the skin above the hinge
     seal = harmonic(mesh, np.concatenate([lips_and_corners, still]),
                     np.concatenate([-weight[lips_and_corners], np.zeros(len(still))])[:, None])[:, 0]
