@@ -19,11 +19,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import facesim
 from facesim.animation.calibration import (
     AMPLITUDE,
     COSINE,
+    FACE_AREA,
     ICT_EXPRESSIONS,
     ICT_ROWS,
+    ICT_SHAPES,
+    PROTOTYPES,
+    against_prototype,
+    apex_frame,
     compare,
     hold,
     hold_row,
@@ -32,7 +38,7 @@ from facesim.animation.calibration import (
     row_control,
 )
 from facesim.animation.simulate import model_for
-from facesim.animation.spec import Spec
+from facesim.animation.spec import Spec, load_spec
 from facesim.animation.timeline import ACTION_UNITS
 from facesim.config import HEAD
 from facesim.face.figure import figure_for
@@ -204,3 +210,22 @@ def test_a_lower_lip_pushed_up_slides_forward_over_the_upper_one(head_model):
     assert relative @ slide > 0.95 * np.linalg.norm(relative) and relative[1] > 0.5  # cm
     assert tilted[lower, 1] > 0.6 and tilted[lower, 2] > 0.3
     assert tilted[upper, 1] < 0.5 * level[upper, 1]
+
+
+#: Ekman's six, each read at its apex as its FACS prototype (REALISM.md): ICT's shapes of
+#: the prototype's units, their intensities fitted, at cosine at least this with the face,
+#: with at least half of those units showing at SHOWS or more.
+BASIC_SIX, PROTOTYPE_COSINE, SHOWS = ("happy", "sad", "angry", "fear", "disgust", "surprise"), 0.7, 0.2
+
+
+@pytest.mark.parametrize("name", BASIC_SIX)
+def test_each_basic_expression_at_its_apex_reads_as_its_facs_prototype(name, ict):
+    """Issue 46.6: angry and fear were rebuilt on FACS's prototypes; each of the six is
+    measured against its prototype composed from ICT's scanned shapes."""
+    animation = facesim.simulate(load_spec(name))
+    k = apex_frame(animation)
+    moved = animation.figure.positions(animation.positions[k], animation.jaw_at(k))
+    _, fitted, weights = against_prototype((moved - animation.figure.rest)[:FACE_AREA], ict, PROTOTYPES[name])
+    assert fitted.cosine >= PROTOTYPE_COSINE, f"{name}: cosine {fitted.cosine:.2f} with its prototype ({weights})"
+    shown = [u for u in PROTOTYPES[name] if u in ICT_SHAPES]
+    assert 2 * sum(weights[u] >= SHOWS for u in shown) >= len(shown), weights

@@ -183,6 +183,56 @@ def hold_row(model, row: str, figure=None, frames: int = FRAMES) -> Held:
     return replace(both, displacement=both.displacement - base.displacement)
 
 
+#: FACS's prototypes of the library's expressions (issue 46.6), the units each is compared
+#: with composed from ICT's shapes as the units' rows are (``ICT_SHAPES``): the units each
+#: file names for its expression; for happy and surprise, which name none, EMFACS's
+#: (Ekman, Friesen and Hager 2002: AU6 + AU12, AU1 + AU2 + AU5 + AU26); the thesis's two
+#: compounds as Du, Tao and Martinez (2014) found them in faces (happily surprised
+#: AU1 + AU2 + AU12 + AU25, angrily disgusted AU4 + AU10 + AU17). ICT's table has no
+#: shape for AU23 (angry's lip tightener) or AU25 (lips parted): they are left out.
+PROTOTYPES = {
+    "happy": ("AU6", "AU12"), "sad": ("AU1", "AU4", "AU15", "AU17"), "surprise": ("AU1", "AU2", "AU5", "AU26"),
+    "fear": ("AU1", "AU2", "AU4", "AU5", "AU7", "AU20", "AU26"), "angry": ("AU4", "AU5", "AU7", "AU23", "AU24"),
+    "disgust": ("AU4", "AU9", "AU10", "AU15"), "duchenne_smile": ("AU6", "AU12"), "blink": ("AU45",),
+    "happy_surprise": ("AU1", "AU2", "AU12", "AU25"), "disgusted_anger": ("AU4", "AU10", "AU17"),
+}
+
+
+@dataclass(frozen=True)
+class Prototyped:
+    """An expression's apex against its FACS prototype (``PROTOTYPES``) from ICT's shapes:
+    composed with every unit at full intensity (``composed``), and with each unit's
+    intensity (0-1) fitted to the apex by bounded least squares (``weights``, the units
+    ICT has shapes for; ``fitted``): how far the face reads as the prototype, and how
+    strongly it shows each unit."""
+
+    frame: int
+    composed: Comparison
+    fitted: Comparison
+    weights: dict[str, float]
+
+
+def apex_frame(animation) -> int:
+    """An expression's apex: the last frame at which its muscles (and jaw) are most
+    activated, the held end of an expression, the middle of a blink."""
+    total = animation.activations.sum(axis=1)
+    return int(np.flatnonzero(total >= total.max() - 1e-9)[-1])
+
+
+def against_prototype(ours: np.ndarray, fields: dict[str, np.ndarray],
+                      units: tuple[str, ...]) -> tuple[Comparison, Comparison, dict[str, float]]:
+    """``ours`` (FACE_AREA, 3), an expression's displacement at its apex, against ICT's
+    shapes for ``units`` (``ict_fields``) composed at full intensity and fitted (``Prototyped``)."""
+    from scipy.optimize import lsq_linear
+
+    shown = [u for u in units if u in ICT_SHAPES]
+    basis = np.stack([fields[u].ravel() for u in shown], axis=1)
+    weights = lsq_linear(basis, ours.ravel(), bounds=(0.0, 1.0), method="bvls").x
+    composed = compare(ours, basis.sum(axis=1).reshape(-1, 3))
+    fitted = compare(ours, (basis @ weights).reshape(-1, 3))
+    return composed, fitted, dict(zip(shown, map(float, weights)))
+
+
 #: ARKit's tongueOut has no ICT shape: it is held to anatomy instead (issue 46), shown as
 #: FACS's AU19 (the jaw opened with it), its tip at least TONGUE_PAST (cm) in front of the
 #: lower incisors' labial face, and nothing of the tongue inside a tooth.
