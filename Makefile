@@ -66,7 +66,8 @@ bench: setup
 	$(BIN)/python scripts/bench.py
 
 # the kernels that ship compiled (facesim/compiled): run after any change to a file with kernels
-kernels: setup
+# (with the photo extra: a photo's first commands ship compiled too)
+kernels: setup $(VENV)/.photo
 	$(BIN)/python scripts/build_kernels.py
 
 # facesim's action units against ICT FaceKit's scanned FACS shapes (../shared/ict-facekit)

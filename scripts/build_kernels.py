@@ -26,13 +26,27 @@ ROOT = Path(__file__).resolve().parent.parent
 #: kernels' parallel twins (facesim.physics.twins: at least PARALLEL_FROM vertices), the
 #: Hopper face Loop-subdivided twice (6,990 vertices), which compile for about 50 s on
 #: a large mesh's first run, in a new user's hands as in the suite's first run on a new machine.
+#: Then a photo's (the README's next commands, with the photo extra's MediaPipe): the face
+#: fitted to scikit-image's astronaut and baked from it (the back-projection's kernels,
+#: 3-4 s of a new user's first `face from-photo`), drawn --onto the photo (the filters on
+#: a frame with alpha, about 2 s), and a frame supersampled (its averaging down).
 COMMANDS = [
     ["render", "expressions/happy.yaml", "-o", "{out}/happy.mp4"],
     ["render", "expressions/surprise.yaml", "-o", "{out}/surprise.png"],
     ["render", "expressions/happy.yaml", "--mesh", "meshes/face.obj", "-o", "{out}/hopper.gif", "--size", "64x64"],
     ["render", "expressions/happy.yaml", "--mesh", "{out}/fine.obj", "--muscles", "{out}/fine.muscles.yaml",
      "-o", "{out}/fine.npz"],
+    ["face", "from-photo", "{out}/astronaut.png", "-o", "{out}/astronaut"],
+    ["render", "expressions/happy.yaml", "--face", "{out}/astronaut", "--onto", "{out}/astronaut.png",
+     "-o", "{out}/onto.png", "--frame", "34"],
+    ["render", "expressions/surprise.yaml", "--supersample", "-o", "{out}/supersampled.png"],
 ]
+#: Writes the photo of the photo's commands.
+PHOTO = """
+import sys, imageio.v3 as iio
+from skimage import data
+iio.imwrite(sys.argv[1] + "/astronaut.png", data.astronaut())
+"""
 #: Writes the large mesh of the last command, and the head's calibrated muscles carried to it by position.
 FINE_MESH = """
 import sys, yaml
@@ -64,6 +78,7 @@ def main() -> int:
         env.pop("NUMBA_CPU_NAME", None)
         env.pop("NUMBA_CPU_FEATURES", None)
         subprocess.run([sys.executable, "-c", FINE_MESH, str(scratch)], cwd=ROOT, env=env, check=True)
+        subprocess.run([sys.executable, "-c", PHOTO, str(scratch)], cwd=ROOT, env=env, check=True)
         for command in COMMANDS:
             command = [sys.executable, "-m", "facesim", *(part.format(out=scratch) for part in command)]
             print(" ".join(command[2:]), flush=True)

@@ -1,5 +1,6 @@
 """What a first run compiles (issue 45): the kernels facesim ships compiled are this code's,
-a new user's first render loads every kernel it runs from them and compiles none, and
+a new user's first render (and first photo's commands) loads every kernel it runs from
+them and compiles none, and
 with no compiled kernels at all a render compiles only the kernels it runs: the serial
 twins of the physics for the head's small skin (facesim.physics.twins), no parallel
 variant and nothing of the photo look. Asserted from Numba's dispatcher statistics,
@@ -119,9 +120,15 @@ def render_counts(tmp_path, shipped: bool, spec: str = "expressions/happy.yaml",
     env = fresh_env(home, shipped)
     if package is not None:
         env["PYTHONPATH"] = str(package)
-    result = subprocess.run([sys.executable, "-c", RENDER_AND_COUNT, "render", str(PROJECT_DIR / spec), "-o",
-                             str(home / "out.mp4"), "--size", "64x64", *map(str, options)],
-                            capture_output=True, text=True, env=env, cwd=package or PROJECT_DIR, timeout=600)
+    return command_counts(env, package or PROJECT_DIR, "render", PROJECT_DIR / spec, "-o", home / "out.mp4",
+                          "--size", "64x64", *options)
+
+
+def command_counts(env: dict, cwd, *args) -> dict:
+    """A facesim command (``args``) in a fresh process in ``env``: each kernel's [hits,
+    misses, parallel] (``RENDER_AND_COUNT``)."""
+    result = subprocess.run([sys.executable, "-c", RENDER_AND_COUNT, *map(str, args)],
+                            capture_output=True, text=True, env=env, cwd=cwd, timeout=600)
     assert result.returncode == 0, result.stderr[-2000:]
     return json.loads(result.stdout.splitlines()[-1])
 
@@ -164,6 +171,29 @@ def test_a_new_users_first_words_over_an_expression_compile_nothing(tmp_path):
     counts = render_counts(tmp_path, True, str(spec))
     assert not compiled(counts)  # nothing compiled
     assert counts["facesim.physics.solver._simulate__serial"][0] >= 1
+
+
+@pytest.mark.skipif(not SHIPPABLE, reason="the kernels ship compiled for x86-64 and Python 3.11")
+def test_a_new_users_first_photo_commands_compile_nothing(tmp_path):
+    """The README's photo commands on a new machine: a face fitted to a photo and baked
+    from it (the back-projection's kernels), drawn --onto the photo (the filters on frames
+    with alpha) and a frame supersampled load their kernels from the shipped ones: they
+    compiled for 3-4, about 2, and 0.4 s."""
+    pytest.importorskip("mediapipe")
+    import imageio.v3 as iio
+    from skimage import data
+
+    photo = tmp_path / "astronaut.png"
+    iio.imwrite(photo, data.astronaut())
+    env = fresh_env(tmp_path / "home", shipped=True)
+    face = command_counts(env, PROJECT_DIR, "face", "from-photo", photo, "-o", tmp_path / "face")
+    onto = command_counts(env, PROJECT_DIR, "render", "expressions/happy.yaml", "--face", tmp_path / "face", "--onto",
+                          photo, "-o", tmp_path / "onto.png", "--frame", "34")
+    supersampled = command_counts(env, PROJECT_DIR, "render", "expressions/surprise.yaml", "--supersample",
+                                  "-o", tmp_path / "supersampled.png")
+    assert not compiled(face) | compiled(onto) | compiled(supersampled)
+    assert face["facesim.face.bake._bake"][0] >= 1 and onto["facesim.renderer.filters._smooth_edges"][0] >= 1
+    assert supersampled["facesim.renderer.filters._downsample"][0] >= 1
 
 
 @pytest.mark.skipif(not SHIPPABLE, reason="the kernels ship compiled for x86-64 and Python 3.11")
