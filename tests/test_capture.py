@@ -70,7 +70,7 @@ def test_a_performance_rendered_by_facesim_is_captured_back(round_trip):
     assert all(abs(lags[name]) <= 3 for name in MAIN), lags
 
 
-@pytest.mark.xfail(strict=True, reason="the left smile rises 3 frames early while the head turns its left side away "
+@pytest.mark.xfail(strict=True, reason="the left smile rises 2-3 frames early while the head turns its left side away "
                    "(MediaPipe's far side, docs/capture.md)")
 def test_the_captured_curves_peak_with_the_true_ones(round_trip):
     spec, _, performance, _ = round_trip

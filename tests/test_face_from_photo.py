@@ -355,7 +355,8 @@ def test_face_options_and_their_errors(faces, photos, tmp_path):
         (["render", "happy", "--look", "photo"], "--look photo: needs a face directory"),
         (["render", "happy", "--face", str(faces["astronaut"]), "--onto", str(wide)], "was fitted to a photo of 512x512"),
         (["render", "happy", "--face", str(broken)], "head_onto.png missing"),
-        (["render", "happy", "--face", str(tmp_path / "nowhere")], "not a face directory"),
+        (["render", "happy", "--face", str(tmp_path / "nowhere")], f"--face: {tmp_path / 'nowhere'}: not a face directory"),
+        (["say", "Hello.", "--face", str(tmp_path / "nowhere")], f"--face: {tmp_path / 'nowhere'}: not a face directory"),
         (["render", str(both)], "face: a face directory brings its own head; leave out identity and mesh"),
         (["render", "happy", "--face", str(faces["astronaut"]), "--look", "plastic"], "--look: expected one of"),
     ]

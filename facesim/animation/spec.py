@@ -223,6 +223,7 @@ class Spec(Strict):
     fap: dict[int, float | list] | Path | None = Field(None, description=(
         "MPEG-4 FAPs by number or name: a value in FAP units, [[frame, value], ...] keys, or an ASCII FAP file"))
     _source: Path | None = PrivateAttr(None)
+    _given: frozenset = PrivateAttr(frozenset())  # fields the command line set (with_overrides)
     _fap_stream: tuple | None = PrivateAttr(None)
 
     @field_validator("fap", mode="before")
@@ -377,7 +378,8 @@ class Spec(Strict):
         """The spec's face directory read back (facesim.face.own_face.FaceDirectory), or None."""
         from ..face.own_face import load_face_directory
 
-        return None if self.face is None else load_face_directory(self._relative(self.face, Path()), f"{self.source}: face")
+        where = "--face" if "face" in self._given else f"{self.source}: face"
+        return None if self.face is None else load_face_directory(self._relative(self.face, Path()), where)
 
     @property
     def head_identity(self):
@@ -402,6 +404,7 @@ class Spec(Strict):
             update["face"] = None
         spec = self.model_copy(update=update)
         spec._source = self._source
+        spec._given = self._given | {k for k, v in changes.items() if v is not None}
         return spec
 
     def resolve(self, name: str) -> Path | None:
