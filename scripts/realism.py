@@ -286,7 +286,8 @@ def prototype_table(shapes, drawing, path: Path) -> str:
         animation = facesim.simulate(load_spec(name))
         k = apex_frame(animation)
         moved = animation.figure.positions(animation.positions[k], animation.jaw_at(k))
-        composed, fitted, weights = against_prototype((moved - animation.figure.rest)[:FACE_AREA], fields, units)
+        measured = against_prototype((moved - animation.figure.rest)[:FACE_AREA], fields, units)
+        composed, fitted, weights = measured.composed, measured.fitted, measured.weights
         missing = [u for u in units if u not in ICT_SHAPES]
         shown = " + ".join(units) + (f" ({', '.join(missing)}: no ICT shape)" if missing else "")
         lines.append(f"| {name} | {shown} | {k} | {composed.cosine:.2f} | {composed.amplitude:.2f} | {fitted.cosine:.2f} | "

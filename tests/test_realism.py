@@ -225,7 +225,8 @@ def test_each_basic_expression_at_its_apex_reads_as_its_facs_prototype(name, ict
     animation = facesim.simulate(load_spec(name))
     k = apex_frame(animation)
     moved = animation.figure.positions(animation.positions[k], animation.jaw_at(k))
-    _, fitted, weights = against_prototype((moved - animation.figure.rest)[:FACE_AREA], ict, PROTOTYPES[name])
-    assert fitted.cosine >= PROTOTYPE_COSINE, f"{name}: cosine {fitted.cosine:.2f} with its prototype ({weights})"
+    measured = against_prototype((moved - animation.figure.rest)[:FACE_AREA], ict, PROTOTYPES[name])
+    weights = measured.weights
+    assert measured.fitted.cosine >= PROTOTYPE_COSINE, f"{name}: cosine {measured.fitted.cosine:.2f} ({weights})"
     shown = [u for u in PROTOTYPES[name] if u in ICT_SHAPES]
     assert 2 * sum(weights[u] >= SHOWS for u in shown) >= len(shown), weights

@@ -206,7 +206,6 @@ class Prototyped:
     ICT has shapes for; ``fitted``): how far the face reads as the prototype, and how
     strongly it shows each unit."""
 
-    frame: int
     composed: Comparison
     fitted: Comparison
     weights: dict[str, float]
@@ -219,10 +218,9 @@ def apex_frame(animation) -> int:
     return int(np.flatnonzero(total >= total.max() - 1e-9)[-1])
 
 
-def against_prototype(ours: np.ndarray, fields: dict[str, np.ndarray],
-                      units: tuple[str, ...]) -> tuple[Comparison, Comparison, dict[str, float]]:
+def against_prototype(ours: np.ndarray, fields: dict[str, np.ndarray], units: tuple[str, ...]) -> Prototyped:
     """``ours`` (FACE_AREA, 3), an expression's displacement at its apex, against ICT's
-    shapes for ``units`` (``ict_fields``) composed at full intensity and fitted (``Prototyped``)."""
+    shapes for ``units`` (``ict_fields``) composed at full intensity and fitted."""
     from scipy.optimize import lsq_linear
 
     shown = [u for u in units if u in ICT_SHAPES]
@@ -230,7 +228,7 @@ def against_prototype(ours: np.ndarray, fields: dict[str, np.ndarray],
     weights = lsq_linear(basis, ours.ravel(), bounds=(0.0, 1.0), method="bvls").x
     composed = compare(ours, basis.sum(axis=1).reshape(-1, 3))
     fitted = compare(ours, (basis @ weights).reshape(-1, 3))
-    return composed, fitted, dict(zip(shown, map(float, weights)))
+    return Prototyped(composed, fitted, dict(zip(shown, map(float, weights))))
 
 
 #: ARKit's tongueOut has no ICT shape: it is held to anatomy instead (issue 46), shown as

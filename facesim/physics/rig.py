@@ -17,10 +17,11 @@ acting on top.
   subject's left or right), so the mandible is a rigid body with translation, not a
   hinge alone. The lips sealed over the open jaw (``lip_seal``, ARKit's mouthClose: the
   orbicularis oris holding the lips together while the jaw drops, as for /p b m/ spoken
-  open) turn with the weight w' = w + s Δw (their glide keeps w), Δw = -w on the lips and the skin around their corners, harmonic
-  out to zero at the rim and above the hinge: the lower lip stays with the upper one and
-  the skin over the chin stretches between it and the jaw (ICT's mouthClose on top of
-  jawOpen: the lower lip back up 3.6 cm, the chin's skin less the further down). The lips
+  open) turn with the weight w' = w + s Δw (their glide keeps w), Δw = -w on the lips and
+  the skin around their corners, harmonic out to zero at the rim and above the hinge: the
+  lower lip stays with the upper one and the skin over the chin stretches between it and
+  the jaw (ICT's mouthClose on top of jawOpen: the lower lip back up 3.6 cm, the chin's
+  skin less the further down). The lips
   drawn as a whole to one side (``mouth_left``/``mouth_right``, ARKit's mouthLeft and
   mouthRight: the modiolus of that side pulling the lips' ring along the teeth) turn
   about the vertical axis of the cylinder the face wraps around (the muscles' projection,
