@@ -26,10 +26,10 @@ PERFORMANCE = load_spec("performance")
 MAIN = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "mouthSmileLeft", "mouthSmileRight")
 
 
-def rendered(tmp_path, name: str, **changes) -> tuple[Spec, object]:
+def rendered(tmp_path, name: str, settings=RenderSettings(width=320, height=320), **changes) -> tuple[Spec, object]:
     spec = PERFORMANCE.with_overrides(name=name, **changes)
     path = tmp_path / f"{name}.mp4"
-    facesim.render(facesim.simulate(spec), path, RenderSettings(width=320, height=320))
+    facesim.render(facesim.simulate(spec), path, settings)
     return spec, path
 
 
@@ -145,6 +145,48 @@ def test_the_largest_of_several_faces_is_followed_and_said(round_trip, tmp_path)
     assert sum("more than one face" in s for s in said) == 1
     true_jaw = next(t for t in spec.timeline if t.target == "jawOpen").values(spec.dt, spec.frames)[:40]
     assert np.corrcoef(performance.weights[:, SOLVED.index("jawOpen")], true_jaw)[0, 1] > 0.9
+
+
+@pytest.fixture(scope="module")
+def photo_clips(tmp_path_factory):
+    """The round trip's curves on the astronaut's face directory (scikit-image's portrait
+    through `face from-photo`): in its photo look, and drawn --onto her photo, each
+    captured back. A textured face is read worse than facesim's clay (docs/capture.md)."""
+    from skimage import data
+
+    from facesim.face.own_face import face_from_photo
+
+    root = tmp_path_factory.mktemp("photo_clips")
+    photo = root / "astronaut.png"
+    iio.imwrite(photo, data.astronaut())
+    face_from_photo(photo, root / "astronaut")
+    clips = {}
+    for name, settings in (("photo look", RenderSettings(width=320, height=320, look="photo")),
+                           ("onto", RenderSettings(onto=photo, width=512, height=512))):
+        spec, video = rendered(root, name.replace(" ", "_"), settings, face=root / "astronaut")
+        clips[name] = spec, capture(video, root / f"{name.replace(' ', '_')}.yaml")
+    return clips
+
+
+@pytest.mark.parametrize("clip, held, head", [("photo look", ("jawOpen", "eyeBlinkLeft", "mouthSmileLeft"), 8.0),
+                                              ("onto", ("eyeBlinkLeft", "mouthSmileLeft"), 12.0)])
+def test_a_photos_face_animated_is_captured_back_on_the_side_it_reads(photo_clips, clip, held, head):
+    """The astronaut's face in its photo look and drawn --onto her photo (92 pixels across
+    in the 512-pixel photo): the controls on the side MediaPipe reads well come back at
+    0.85 or more (docs/capture.md: 0.89-0.94) and the head within a few degrees; her right
+    blink and smile are the full bar's failure, below."""
+    spec, performance = photo_clips[clip]
+    correlations = {name: round(r, 3) for name, (r, _) in agreement(spec, performance).items()}
+    assert all(correlations[name] >= 0.85 for name in held), correlations
+    assert np.abs(performance.head - pose_table(spec)[:, :3]).max() <= head
+
+
+@pytest.mark.xfail(strict=True, reason="a textured face's right blink comes back at 0.45-0.54 and its right smile at "
+                   "0.63-0.65; her closed lids show the photo's iris and lashes dragged down (the fitted lids cover "
+                   "part of her iris in the photo), not a closed eye (docs/capture.md)")
+@pytest.mark.parametrize("clip", ["photo look", "onto"])
+def test_a_photos_face_animated_is_captured_back(photo_clips, clip):
+    check_round_trip(*photo_clips[clip])
 
 
 def facesim_command(*args, cwd):
