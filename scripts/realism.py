@@ -277,7 +277,7 @@ def prototype_table(shapes, drawing, path: Path) -> str:
     import facesim
     from facesim.animation.spec import load_spec
 
-    fields = {row: field[:FACE_AREA] for row, field in ((u, ict_displacement(shapes, u)) for u in ICT_SHAPES)}
+    fields = ict_fields(shapes)
     renderer, crop, figure = drawing
     lines = ["| expression | FACS's prototype | apex frame | composed: cosine | amplitude | fitted: cosine | amplitude "
              "| each unit's fitted intensity |", "|---|---|---|---|---|---|---|---|"]

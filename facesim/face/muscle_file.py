@@ -37,6 +37,7 @@ from ..physics.muscles import (
     JawRig,
     MuscleSet,
 )
+from ..physics.rig import jaw_forward
 from ..schema import Strict, load_model
 from .head import HeadMesh
 
@@ -309,9 +310,7 @@ def resolve_muscles(spec: MuscleFile, mesh: FaceMesh, source: str = "muscles") -
         span = float(np.linalg.norm(hinge[1] - hinge[0]))
         if span < 0.1 * width:
             raise InputError(f"{where}: hinge: its two points must lie on either side of the face")
-        axis = (hinge[1] - hinge[0]) / span
-        forward = np.array([0.0, 0.0, 1.0]) - axis[2] * axis  # in the horizontal plane, as the jaw glides (rig)
-        hinge = hinge - spec.jaw.hinge_depth * span * forward / np.linalg.norm(forward)
+        hinge = hinge - spec.jaw.hinge_depth * span * jaw_forward((hinge[1] - hinge[0]) / span)
         upper = np.array([_snap(p, mesh, f"{where}: upper") for p in spec.jaw.upper], dtype=np.int64)
         lower = np.array([_snap(p, mesh, f"{where}: lower", below=u) for p, u in zip(spec.jaw.lower, upper)], dtype=np.int64)
         _upper_over_lower(mesh, upper, lower, where)

@@ -412,6 +412,15 @@ def _cavity_wall(mesh: FaceMesh, jaw) -> tuple[np.ndarray, float]:
     return np.column_stack([wall * left, wall * (1.0 - left)]), outward
 
 
+def jaw_forward(axis: np.ndarray) -> np.ndarray:
+    """The mandible's forward, a unit vector: perpendicular to the hinge ``axis`` (a unit
+    vector) in the horizontal plane. The condyles glide along it (AU29), and the muscle
+    file's joints lie ``hinge_depth`` behind their hinge points against it
+    (facesim.face.muscle_file)."""
+    forward = np.array([0.0, 0.0, 1.0]) - axis[2] * axis
+    return forward / np.linalg.norm(forward)
+
+
 def _smoothstep(t: np.ndarray) -> np.ndarray:
     t = np.clip(t, 0.0, 1.0)
     return t * t * (3 - 2 * t)
@@ -546,10 +555,8 @@ def build_rig(mesh: FaceMesh, muscles: MuscleSet) -> Rig:
         drive_weight[:] = JAW_DRIVE * jaw_weight
         drive_weight[corners] = 1.0
         glide_column = np.array([muscles.index(c) for c in JAW_CONTROLS[1:4]], dtype=np.int64)
-        forward = np.array([0.0, 0.0, 1.0]) - axis[2] * axis  # in the horizontal plane: the axis is +x
-        forward /= np.linalg.norm(forward)
         jaw = muscles.jaw
-        glide = np.array([jaw.protrusion * forward, jaw.excursion * axis, -jaw.excursion * axis])
+        glide = np.array([jaw.protrusion * jaw_forward(axis), jaw.excursion * axis, -jaw.excursion * axis])
     else:
         jaw_column, jaw_weight, hinge, axis, jaw_max = -1, np.zeros(n), np.zeros(3), np.array([1.0, 0, 0]), 0.0
         glide_column, glide = np.full(3, -1, dtype=np.int64), np.zeros((3, 3))
