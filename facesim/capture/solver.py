@@ -4,9 +4,10 @@ shapes per frame, solved against facesim's own landmark motion as MediaPipe sees
 1. **The basis** (``head_basis``, kept in facesim's cache). Each shape held by the physics
    on the default head at ``BASIS_WEIGHTS``, rendered from the front, its landmarks found
    and put into the head's frame; its motion per unit weight is the slope through them.
-   The neutral head turned by known angles measures how MediaPipe misreads a turned
-   head: its angles (``TURNS``) and, on a yaw-by-pitch grid, its landmarks in the image
-   (``GRID``, ``_image_residual``).
+   The neutral head turned by known angles, each render read as a video's frame is
+   (tracking.read_as_video), measures how MediaPipe misreads a turned head: its angles
+   (``TURNS``) and, on a yaw-by-pitch grid, its landmarks in the image (``GRID``,
+   ``_image_residual``).
 2. **Pose.** Each frame's landmarks (the face frame: x the subject's left, y up, z toward
    the camera) are fitted by the similarity (Umeyama 1991) that best takes a template
    onto them, first at the ``RIGID`` landmarks, which expressions barely move. Its
@@ -19,9 +20,10 @@ shapes per frame, solved against facesim's own landmark motion as MediaPipe sees
    turned head's misreading, plus the shapes' motion turned with it, is solved against
    the frame's landmarks in the image (x, y: MediaPipe's depth is a guess) by bounded
    least squares with a small ridge (scipy's ``lsq_linear``, weights 0-1), the side
-   turned away counting less (``FAR_SIDE``). The pose is then fitted again on every
-   landmark with the frame's shapes in the template, and the shapes solved again
-   (``REFINEMENTS``), so that neither is read as the other.
+   turned away counting less (``FAR_SIDE``). The pose is solved with them: a small turn
+   about each axis, a shift and a scale of the fitted head are unknowns of the same
+   solve, unbounded and without a ridge (the similarity's differential), so that a pose
+   a few tenths of a degree off is not read as shapes nor shapes as a pose.
 5. **Smoothing without lag.** Weights, angles and the irises are smoothed over time by a
    Savitzky-Golay filter (a centred, zero-phase least-squares polynomial), which removes
    the tracker's jitter and leaves peaks where they are.
@@ -62,8 +64,6 @@ SOLVED = tuple(n for n in ARKIT_52 if not n.startswith("eyeLook") and n != "tong
 #: The ridge on the weights, in centimetres of landmark motion per unit weight: it keeps
 #: shapes that barely explain the motion at zero.
 RIDGE = 0.05
-#: Times the pose is fitted again on every landmark with the frame's shapes in the template.
-REFINEMENTS = 2
 #: How much less the side turned away counts: 1 - FAR_SIDE x (how far out) x sin(yaw).
 FAR_SIDE = 1.0
 
@@ -183,15 +183,20 @@ def _rendered_motion(spec, rest: np.ndarray) -> dict[str, np.ndarray]:
     from ..animation.simulate import simulate
     from ..renderer.scene import FaceRenderer
     from ..renderer.settings import RenderSettings
-    from .tracking import face_tracker
+    from .tracking import face_tracker, read_as_video
 
     settings = RenderSettings(width=BASIS_SIZE, height=BASIS_SIZE)
     renderer = None
 
     def seen(animation, pose=None) -> np.ndarray:
+        """The landmarks of ``animation``'s last frame, found as in a still, or for a
+        turned head (``pose``) as in a video (how the head's turns are read)."""
         image = renderer.frame(animation, BASIS_FRAMES - 1, pose=pose)
-        with face_tracker(still=True) as faces_in:
-            faces = faces_in(image)
+        if pose is not None:
+            faces = read_as_video(image)
+        else:
+            with face_tracker(still=True) as faces_in:
+                faces = faces_in(image)
         if not faces:
             raise RuntimeError("MediaPipe found no face in facesim's render of its own head")
         return image_to_face_frame(faces[0])
@@ -217,20 +222,25 @@ def _rendered_motion(spec, rest: np.ndarray) -> dict[str, np.ndarray]:
         levels = np.asarray(BASIS_WEIGHTS)
         out = {"motion": np.stack([sum(w * (in_head_frame(seen(held(name, w))) - at_rest) for w in levels)
                                    / (levels**2).sum() for name in SOLVED])}
+        # a turned head read as a video's frames are: the angles a fit finds, and where its
+        # landmarks lie against the same head facing the camera read the same way (as a
+        # video's turns are read against its neutral frames)
         for axis, name in enumerate(("yaw", "pitch")):
-            found = []
-            for angle in TURNS[name]:
-                pose = np.zeros(5)
-                pose[axis] = angle
-                found.append(canonical(seen(neutral, pose), at_rest, range(LANDMARKS)))
             out[f"{name}_true"] = np.asarray(TURNS[name])
-            out[f"{name}_seen"] = np.array([angles[axis] for angles, _ in found])
-        out["grid_residual"] = np.stack([[_image_residual(seen(neutral, np.array([yaw, pitch, 0.0, 0.0, 0.0])), at_rest)
-                                          for pitch in GRID["pitch"]] for yaw in GRID["yaw"]])
+            out[f"{name}_seen"] = np.array([canonical(seen(neutral, _turn(**{name: angle})), at_rest,
+                                                      range(LANDMARKS))[0][axis] for angle in TURNS[name]])
+        grid = np.stack([[_image_residual(seen(neutral, _turn(yaw, pitch)), at_rest) for pitch in GRID["pitch"]]
+                         for yaw in GRID["yaw"]])
+        out["grid_residual"] = grid - grid[list(GRID["yaw"]).index(0.0), list(GRID["pitch"]).index(0.0)]
         return out
     finally:
         if renderer is not None:
             renderer.close()
+
+
+def _turn(yaw: float = 0.0, pitch: float = 0.0) -> np.ndarray:
+    """A pose (facesim.animation.spec.POSE's order) turning the head by ``yaw`` and ``pitch``."""
+    return np.array([yaw, pitch, 0.0, 0.0, 0.0])
 
 
 def canonical(points: np.ndarray, template: np.ndarray, fitted=RIGID) -> tuple[np.ndarray, np.ndarray]:
@@ -287,14 +297,12 @@ def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None
         seen = points(k)
         raw[k], faces[k] = canonical(seen, neutral, RIGID)
         yaw, pitch, _ = basis.true_angles(raw[k:k + 1])[0]
-        misread = basis.image_residual(yaw, pitch)
-        weights[k] = _shapes_in_the_image(seen, neutral, np.zeros(len(SOLVED)), misread, basis, RIGID)
-        for _ in range(REFINEMENTS):  # the pose again, on every landmark, the shapes' motion in the template
-            weights[k] = _shapes_in_the_image(seen, neutral, weights[k], misread, basis, range(LANDMARKS))
+        weights[k] = _shapes_in_the_image(seen, neutral, basis.image_residual(yaw, pitch), basis)
         if progress:
             progress(1)
     weights, raw, faces = bridged(weights, good), bridged(raw, good), bridged(faces, good)
     head = basis.true_angles(raw)
+    head -= np.median(head[first], axis=0)  # from how the head faced the camera at first
     window = max(ORDER + 1, int(round(SMOOTHING * fps)) | 1)
     if frames > window:
         weights = np.clip(savgol_filter(weights, window, ORDER, axis=0), 0.0, 1.0)
@@ -305,28 +313,42 @@ def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None
                        turned=np.flatnonzero(turned).tolist())
 
 
-def _shapes_in_the_image(points: np.ndarray, neutral: np.ndarray, weights: np.ndarray, misread: np.ndarray, basis: Basis,
-                         fitted) -> np.ndarray:
-    """One frame's shapes, solved where MediaPipe is surest, in the image: the head fitted
-    at the ``fitted`` landmarks to the subject's neutral moved by ``weights``, the shapes'
-    motion turned and scaled by that fit, what MediaPipe's landmarks of a head so turned
-    are off by (``misread``: ``Basis.image_residual``) allowed for, and the landmarks'
-    image positions (x, y) solved by bounded least squares with a ridge. A turned face's hidden side,
-    whose depth MediaPipe guesses, counts only as far as it shows."""
+def _shapes_in_the_image(points: np.ndarray, neutral: np.ndarray, misread: np.ndarray, basis: Basis) -> np.ndarray:
+    """One frame's shapes, solved where MediaPipe is surest, in the image: the subject's
+    neutral turned, scaled and placed by the similarity fitted at the ``RIGID`` landmarks,
+    what MediaPipe's landmarks of a head so turned are off by (``misread``:
+    ``Basis.image_residual``) allowed for, and the landmarks' image positions (x, y)
+    solved by bounded least squares with a ridge for the shapes' weights, turned and
+    scaled by that fit, and for the fit's small corrections (``_pose_differential``). A
+    turned face's hidden side, whose depth MediaPipe guesses, counts only as far as it
+    shows."""
     from scipy.optimize import lsq_linear
 
-    fitted = list(fitted)
-    template = neutral[:LANDMARKS] + np.tensordot(weights, basis.motion[:, :LANDMARKS], axes=1)
-    scale, rotation, translation = similarity(template[fitted], points[fitted])
-    start = scale * neutral[:LANDMARKS] @ rotation.T + translation
-    start[:, :2] += scale * misread
+    rigid = list(RIGID)
+    scale, rotation, translation = similarity(neutral[rigid], points[rigid])
+    turned = scale * neutral[:LANDMARKS] @ rotation.T
+    start = (turned + translation)[:, :2] + scale * misread
     # the side of the face turned away counts less, the more so the further out and the more turned
     away = np.clip(np.sign(rotation[0, 2]) * neutral[:LANDMARKS, 0] / np.abs(neutral[:LANDMARKS, 0]).max(), 0.0, 1.0)
     counts = np.clip(1.0 - FAR_SIDE * away * abs(rotation[0, 2]), 0.1, 1.0)[:, None]
-    design = ((scale * basis.motion[:, :LANDMARKS] @ rotation.T)[:, :, :2] * counts).reshape(len(SOLVED), -1).T
-    design = np.vstack([design, scale * RIDGE * np.eye(len(SOLVED))])
-    target = np.concatenate([((points[:LANDMARKS, :2] - start[:, :2]) * counts).ravel(), np.zeros(len(SOLVED))])
-    return lsq_linear(design, target, bounds=(0.0, 1.0), method="bvls").x
+    shapes = (scale * basis.motion[:, :LANDMARKS] @ rotation.T)[:, :, :2]
+    columns = np.concatenate([shapes, _pose_differential(turned - turned.mean(axis=0))]) * counts
+    solved, free = len(SOLVED), len(columns) - len(SOLVED)
+    design = np.vstack([columns.reshape(len(columns), -1).T,
+                        np.hstack([scale * RIDGE * np.eye(solved), np.zeros((solved, free))])])
+    target = np.concatenate([((points[:LANDMARKS, :2] - start) * counts).ravel(), np.zeros(solved)])
+    bounds = (np.r_[np.zeros(solved), np.full(free, -np.inf)], np.r_[np.ones(solved), np.full(free, np.inf)])
+    return lsq_linear(design, target, bounds=bounds, method="bvls").x[:solved]
+
+
+def _pose_differential(turned: np.ndarray) -> np.ndarray:
+    """(6, n, 2): how the image positions of the head's ``turned`` points (about their
+    centroid, face frame) move per radian of a turn about the x, y and z axes (omega x
+    p), per unit shift along x and y, and per unit of scale."""
+    x, y, z = turned.T
+    nothing, one = np.zeros_like(x), np.ones_like(x)
+    return np.stack([np.stack(pair, axis=1) for pair in
+                     ((nothing, -z), (z, nothing), (-y, x), (one, nothing), (nothing, one), (x, y))])
 
 
 def _gaze(iris_moved: np.ndarray, neutral: np.ndarray, basis: Basis, weights: np.ndarray) -> np.ndarray:
