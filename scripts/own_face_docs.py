@@ -62,7 +62,6 @@ def enlarged(image: np.ndarray, factor: int = 2) -> np.ndarray:
 def main() -> None:
     from facesim.animation.simulate import simulate
     from facesim.animation.spec import Envelope, Spec, Track, load_spec
-    from facesim.cli import apex_frame
     from facesim.export.plots import contact_sheet
     from facesim.face.own_face import face_from_photo, load_face_directory
     from facesim.face.photo import read_image
@@ -90,7 +89,7 @@ def main() -> None:
             row.append(renderer.render(neutral.rest))
             for expression in ("happy", "surprise"):
                 animation = simulate(load_spec(expression).with_overrides(face=face.path))
-                row.append(renderer.frame(animation, apex_frame(animation)))
+                row.append(renderer.frame(animation, animation.apex_frame))
         images += row
         labels += [f"{name}: photo", "fitted head (clay) over it", "textured, neutral", "happy", "surprise"]
     contact_sheet(images, labels, ROOT / "docs" / "own_face.png", columns=5, replace=True)

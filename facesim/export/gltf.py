@@ -24,8 +24,8 @@ is for a user who wants to drive it as a bone.
 A face directory's rig (``face``: facesim face from-photo) is the same head in its
 identity, with the photo baked into the directory's atlas (head.png, embedded) as the base
 colour of the parts the atlas holds (skin, back of the head, scleras, irises), drawn as
-facesim's photo look draws them: unlit (``UNLIT``), the eyelashes left out (the photo's own are in the
-texture). glTF keeps one texture coordinate per vertex, so a vertex where the atlas's
+facesim's photo look draws them: unlit (``UNLIT``), of the eyelashes only the upper
+(facesim.face.figure.Figure.upper_lashes). glTF keeps one texture coordinate per vertex, so a vertex where the atlas's
 islands meet is split (``texture_seams``): the first 26,719 vertices are still ICT's, in its
 order, and each one after is a copy of ICT's vertex ``mesh.extras.seams[i]``.
 
@@ -269,7 +269,7 @@ def rig_glb(shapes, figure, clip: Clip | None = None, name: str = "facesim head"
     primitives = []
     for part in figure.parts:
         if texture is not None and part.name == "M_EyeLashes":
-            continue  # the photo's own lashes are in its texture, as facesim's photo look draws it
+            part = figure.upper_lashes(part)  # as facesim's photo look draws them
         see_through = part.name == "M_EyeLashes"
         on_photo = part.name in textured
         gltf.materials.append(g.Material(

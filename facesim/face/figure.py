@@ -23,7 +23,7 @@ occlusion shells the lid vertices nearest them.
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -160,6 +160,20 @@ class Figure:
     @property
     def triangles(self) -> np.ndarray:
         return np.concatenate([p.triangles for p in self.parts])
+
+    def upper_lashes(self, lashes: Part) -> Part:
+        """The eyelashes' part with only the upper lids' lashes: what a face directory's
+        photo look draws (facesim.renderer.scene) and its rig carries (facesim.export.gltf).
+        The photo's texture has the lashes the photo shows, drawn on the lids; a closing
+        upper lid stretches them into a murky band over the eye with a gap at its foot,
+        which neither a viewer nor MediaPipe reads as a closed eye (the capture's round
+        trip read the astronaut's left blink at 0.81). The upper lashes close the eye with
+        a lash line (0.91); the lower ones, over the photo's own, showed as a grey shelf
+        under the open eye."""
+        centres = np.array([centre for _, centre in self.eyes])
+        middle = self.rest[lashes.triangles].mean(axis=1)
+        nearest = centres[np.argmin(np.abs(middle[:, None, 0] - centres[None, :, 0]), axis=1)]
+        return replace(lashes, triangles=lashes.triangles[middle[:, 1] > nearest[:, 1]])
 
     def positions(self, sim: np.ndarray, jaw=0.0, gaze: tuple[float, float] = (0.0, 0.0), look=None) -> np.ndarray:
         """(N, 3): the figure for simulated positions ``sim`` (n, 3), the jaw (its angle

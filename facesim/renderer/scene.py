@@ -195,9 +195,9 @@ class FaceRenderer:
         vertex; smooth normals over the whole figure, so seams between parts that share
         vertices (face, scalp, neck) do not show. With ``face`` (the photo look) the parts
         the atlas holds are textured by its baked photo, their vertices split where the
-        atlas's islands meet (``_texture_vertices``); the eyelashes are left out (the
-        photo's own are in the texture), and the other parts' colours are shaded once at
-        rest (``PHOTO_AMBIENT``), the whole drawn unlit."""
+        atlas's islands meet (``_texture_vertices``); of the eyelashes only the upper are
+        drawn (``Figure.upper_lashes``), and the other parts' colours are shaded once at rest
+        (``PHOTO_AMBIENT``), the whole drawn unlit."""
         self._faces = np.ascontiguousarray(figure.triangles, dtype=np.int64)
         self._normals = np.empty_like(figure.rest)
         _vertex_normals(figure.rest, self._faces, self._normals)
@@ -226,7 +226,7 @@ class FaceRenderer:
             shade = lit * np.clip(1.0 - (1.0 - MOUTH_DARKEST) * deep / MOUTH_DEEP, MOUTH_DARKEST, 1.0)
         for part in figure.parts:
             if face is not None and part.name == "M_EyeLashes":
-                continue
+                part = figure.upper_lashes(part)
             if texture is not None and part.uv is not None:
                 rows, uv, local = _texture_vertices(part.triangles, part.uv)
                 material = pyrender.MetallicRoughnessMaterial(baseColorTexture=texture, metallicFactor=0.0, doubleSided=False)
