@@ -798,7 +798,7 @@ def capture(
         if path is not None:
             check_destination(path, force)
     source = open_source(video, fps)
-    with progress_bar(2 * source.frames, f"capturing {video.name}") as advance:
+    with progress_bar(3 * source.frames, f"capturing {video.name}") as advance:
         performance = captured(source, output, curves, plot, replace=force, notice=notice, progress=advance)
     moving = int((performance.weights.max(axis=0) >= 0.03).sum())
     written = ", ".join(str(p) for p in (output, curves, plot) if p is not None)

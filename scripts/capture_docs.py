@@ -6,7 +6,8 @@
   that made the clip) on the default head, on identity 7 (a face the solver was not
   built on), in the photo look of the astronaut's face directory, and drawn --onto its
   photo: each main control's Pearson correlation, their mean over the controls that
-  move, the largest lag, and the head's largest error.
+  move, the largest lag, the head's largest error, and whose turns the capture read the
+  clip's by (facesim.capture.subject).
 
 The astronaut's face directory is written to out/capture/ (made afresh each run).
 """
@@ -39,7 +40,8 @@ def row(name: str, spec, performance) -> str:
     cells = [f"{found[n][0]:.2f}" for n in MAIN]
     mean = np.mean([r for r, _ in found.values()])
     lag = max(abs(lag) for _, lag in found.values())
-    return f"| {name} | " + " | ".join(cells) + f" | {mean:.2f} | {lag} | {head:.1f} |"
+    turns = "the subject's" if performance.turns_read_on.startswith("the subject") else "the default head's"
+    return f"| {name} | " + " | ".join(cells) + f" | {mean:.2f} | {lag} | {head:.1f} | {turns} |"
 
 
 def main() -> int:
@@ -81,7 +83,8 @@ def main() -> int:
     frames = [np.concatenate([small(a), small(b)], axis=1) for a, b in zip(source[::2], replayed[::2])]
     iio.imwrite(ROOT / "docs" / "capture.gif", np.stack(frames), duration=80, loop=0)
     table = ("| clip | jaw | blink L | blink R | smile L | smile R | inner brows | mean | largest lag (frames) "
-             "| head's largest error (degrees) |\n|---|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n")
+             "| head's largest error (degrees) | turns read as on |\n|---|---|---|---|---|---|---|---|---|---|---|\n"
+             + "\n".join(rows) + "\n")
     doc = ROOT / "docs" / "capture.md"
     text = doc.read_text()
     start = text.index("| clip | jaw |")

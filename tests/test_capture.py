@@ -170,16 +170,27 @@ def photo_clips(tmp_path_factory):
 def test_a_photos_face_animated_is_captured_back_on_the_side_it_reads(photo_clips, clip, held, head):
     """The astronaut's face in its photo look and drawn --onto her photo (92 pixels across
     in the 512-pixel photo): the controls on the side MediaPipe reads well come back at
-    0.8 or more (docs/capture.md: 0.84-0.94) and the head within a few degrees; her blinks
-    in the photo look, her right smile and the inner brows are the full bar's failure, below."""
+    0.8 or more (docs/capture.md: 0.86-0.95) and the head within a few degrees; her right
+    smile, the photo look's left blink and the head's angles are the full bar's failure, below."""
     spec, performance = photo_clips[clip]
     correlations = {name: round(r, 3) for name, (r, _) in agreement(spec, performance).items()}
     assert all(correlations[name] >= 0.8 for name in held), correlations
     assert np.abs(performance.head - pose_table(spec)[:, :3]).max() <= head
 
 
-@pytest.mark.xfail(strict=True, reason="a textured face's right blink comes back at 0.64-0.68 and its right smile at "
-                   "0.46-0.58; her closed lids show the photo's lashes dragged down, not a closed eye (docs/capture.md)")
+def test_a_textured_face_is_read_with_its_own_turns(photo_clips, round_trip):
+    """A turned face is misread differently on every face: the capture measures it on a
+    face fitted to the video's neutral frame too, and keeps what the frames fit better
+    (docs/capture.md): the subject's own for the astronaut's textured face, the default
+    head's for facesim's clay, and the written spec says which."""
+    assert all(photo_clips[clip][1].turns_read_on.startswith("the subject's face") for clip in photo_clips)
+    _, _, performance, root = round_trip
+    assert performance.turns_read_on == "facesim's default head"
+    assert "misreading as measured on facesim's default head" in (root / "performance.yaml").read_text()
+
+
+@pytest.mark.xfail(strict=True, reason="a textured face's right smile comes back at 0.63-0.82, the photo look's left blink "
+                   "at 0.89 and the head 4.7-8.7 degrees off (docs/capture.md)")
 @pytest.mark.parametrize("clip", ["photo look", "onto"])
 def test_a_photos_face_animated_is_captured_back(photo_clips, clip):
     check_round_trip(*photo_clips[clip])

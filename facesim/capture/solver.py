@@ -75,16 +75,19 @@ SMOOTHING, ORDER = 0.2, 2
 class Performance:
     """A captured performance at ``fps``: ``weights`` (frames, len(SOLVED)) in [0, 1];
     ``head`` (frames, 3) yaw, pitch, roll and ``gaze`` (frames, 2, 2) each eye's yaw and
-    pitch in degrees (facesim.animation.spec.POSE: the subject's left eye first); the
-    frames bridged, and why."""
+    pitch in degrees (facesim.animation.spec.POSE: the subject's left eye first); how far
+    each frame's landmarks lie from the solved face (``residual``, frames: RMS over the
+    landmarks, cm on the head; NaN where bridged); the frames bridged, and why."""
 
     fps: float
     weights: np.ndarray
     head: np.ndarray
     gaze: np.ndarray
+    residual: np.ndarray
     missing: list[int] = field(default_factory=list)
     turned: list[int] = field(default_factory=list)
     names: tuple[str, ...] = SOLVED
+    turns_read_on: str = "facesim's default head"
 
     @property
     def frames(self) -> int:
@@ -109,6 +112,10 @@ class Basis:
     eye_radius: float
     turns: dict[str, np.ndarray] = field(default_factory=dict)  # TURNS' tables, GRID's residuals
 
+    def turned_as(self, turns: dict[str, np.ndarray]) -> "Basis":
+        """This basis with another head's turns (``face_turns``)."""
+        return Basis(self.rest, self.motion, self.eye_radius, turns)
+
     def true_angles(self, raw: np.ndarray) -> np.ndarray:
         """The head's true yaw, pitch and roll for the ``raw`` (frames, 3) angles a fit
         found: measured on the neutral head turned by known angles (``TURNS``) and
@@ -121,9 +128,10 @@ class Basis:
 
     def image_residual(self, yaw: float, pitch: float) -> np.ndarray:
         """(468, 2) ``_image_residual`` of the neutral head at this true yaw and pitch,
-        bilinear in GRID (held at its edges)."""
+        bilinear in the grid measured (GRID's nodes, or some of them: ``grid_yaw``,
+        ``grid_pitch``), held at its edges."""
         out = 0.0
-        (ya, yb, fy), (pa, pb, fp) = (_between(GRID[n], v) for n, v in (("yaw", yaw), ("pitch", pitch)))
+        (ya, yb, fy), (pa, pb, fp) = (_between(self.turns[f"grid_{n}"], v) for n, v in (("yaw", yaw), ("pitch", pitch)))
         table = self.turns["grid_residual"]
         for j, wy in ((ya, 1 - fy), (yb, fy)):
             for i, wp in ((pa, 1 - fp), (pb, fp)):
@@ -166,28 +174,63 @@ def _image_residual(points: np.ndarray, neutral: np.ndarray) -> np.ndarray:
 def head_basis(spec) -> Basis:
     """ARKit's shapes' landmark motion on ``spec``'s head as MediaPipe sees it: each shape
     held at full weight by the physics, rendered from the front, its landmarks found and
-    put into the head's frame as a video's are (``canonical``), less the neutral render's.
-    Measured once and kept in facesim's cache (facesim.cache) by the code and the head."""
+    put into the head's frame as a video's are (``canonical``), less the neutral render's;
+    and the head's turns (``TURNS``, ``GRID``). Measured once and kept in facesim's cache
+    (facesim.cache) by the code and the head."""
     from .. import cache
-    from ..animation.simulate import model_for
     from ..config import VERSION
 
-    model = model_for(spec)
-    head = model.mesh.head
-    rest = np.einsum("kj,kjd->kd", head.landmark_weight, head.vertices[head.landmark_vertex])
-    parts = [Path(__file__).read_bytes(), VERSION.encode(), model.rest_position.tobytes(), spec.muscles_path.read_bytes(),
+    rest, radius = _landmarks_at_rest(spec)
+    parts = [Path(__file__).read_bytes(), VERSION.encode(), rest.tobytes(), spec.muscles_path.read_bytes(),
              spec.material.model_dump_json().encode(), " ".join(SOLVED).encode()]
-    stored = cache.cached_arrays("capture-basis", cache.key(*parts), lambda: _rendered_motion(spec, rest), keep=2)
-    return Basis(rest, stored["motion"], head.eyeball("left")[1], {k: v for k, v in stored.items() if k != "motion"})
+    stored = cache.cached_arrays("capture-basis", cache.key(*parts), lambda: _rendered(spec, rest, shapes=True), keep=2)
+    return Basis(rest, stored["motion"], radius, {k: v for k, v in stored.items() if k != "motion"})
 
 
-def _rendered_motion(spec, rest: np.ndarray) -> dict[str, np.ndarray]:
+def face_turns(face: Path, grid: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``Basis.turns``' grid (``grid_yaw``, ``grid_pitch``, ``grid_residual``) measured at
+    ``grid``'s nodes on a face directory's head in its photo look (the subject's, fitted
+    from a video's neutral frame: facesim.capture.subject)."""
+    from ..animation.spec import Spec
+
+    spec = Spec(name="capture", face=face)
+    return _rendered(spec, _landmarks_at_rest(spec)[0], shapes=False, angles=False, look="photo", grid=grid)
+
+
+def turn_grid(tracked: Tracked, fps: float, basis: Basis) -> dict[str, np.ndarray]:
+    """The nodes of ``GRID`` the video's turns span, one node beyond them each way, and 0
+    (the face facing the camera, which the grid is read against)."""
+    found = [k for k, landmarks in enumerate(tracked.landmarks) if landmarks is not None]
+    raw = np.array([canonical(image_to_face_frame(np.asarray(tracked.landmarks[k], dtype=np.float64)), basis.rest)[0]
+                    for k in found])
+    angles = basis.true_angles(raw - np.median(raw[:max(1, int(round(NEUTRAL_SECONDS * fps)))], axis=0))
+    out = {}
+    for axis, name in enumerate(("yaw", "pitch")):
+        nodes, step = GRID[name], GRID[name][1] - GRID[name][0]
+        low, high = min(angles[:, axis].min(), 0.0) - step, max(angles[:, axis].max(), 0.0) + step
+        out[name] = nodes[(nodes >= low) & (nodes <= high)]
+    return out
+
+
+def _landmarks_at_rest(spec) -> tuple[np.ndarray, float]:
+    """``spec``'s head's landmarks at rest (468, 3) cm, and its eyeballs' radius."""
+    from ..animation.simulate import model_for
+
+    head = model_for(spec).mesh.head
+    return np.einsum("kj,kjd->kd", head.landmark_weight, head.vertices[head.landmark_vertex]), head.eyeball("left")[1]
+
+
+def _rendered(spec, rest: np.ndarray, shapes: bool, angles: bool = True, look: str = "clay",
+              grid: dict[str, np.ndarray] = GRID) -> dict[str, np.ndarray]:
+    """The renders ``head_basis`` and ``face_turns`` measure: each shape's ``motion`` (if
+    ``shapes``), the turned head's angles (``yaw_seen``, ``pitch_seen``, if ``angles``) and
+    its landmarks' misreading at ``grid``'s nodes (``grid_residual``)."""
     from ..animation.simulate import simulate
     from ..renderer.scene import FaceRenderer
     from ..renderer.settings import RenderSettings
     from .tracking import face_tracker, read_as_video
 
-    settings = RenderSettings(width=BASIS_SIZE, height=BASIS_SIZE)
+    settings = RenderSettings(width=BASIS_SIZE, height=BASIS_SIZE, look=look)
     renderer = None
 
     def seen(animation, pose=None) -> np.ndarray:
@@ -220,20 +263,22 @@ def _rendered_motion(spec, rest: np.ndarray) -> dict[str, np.ndarray]:
             return (kept - translation) @ rotation / scale
 
         at_rest = in_head_frame(points)
-        # the slope through rest of each shape's motion at BASIS_WEIGHTS, by least squares
-        levels = np.asarray(BASIS_WEIGHTS)
-        out = {"motion": np.stack([sum(w * (in_head_frame(seen(held(name, w))) - at_rest) for w in levels)
-                                   / (levels**2).sum() for name in SOLVED])}
+        out = {}
+        if shapes:  # the slope through rest of each shape's motion at BASIS_WEIGHTS, by least squares
+            levels = np.asarray(BASIS_WEIGHTS)
+            out["motion"] = np.stack([sum(w * (in_head_frame(seen(held(name, w))) - at_rest) for w in levels)
+                                      / (levels**2).sum() for name in SOLVED])
         # a turned head read as a video's frames are: the angles a fit finds, and where its
         # landmarks lie against the same head facing the camera read the same way (as a
         # video's turns are read against its neutral frames)
-        for axis, name in enumerate(("yaw", "pitch")):
+        for axis, name in enumerate(("yaw", "pitch") if angles else ()):
             out[f"{name}_true"] = np.asarray(TURNS[name])
             out[f"{name}_seen"] = np.array([canonical(seen(neutral, _turn(**{name: angle})), at_rest,
                                                       range(LANDMARKS))[0][axis] for angle in TURNS[name]])
-        grid = np.stack([[_image_residual(seen(neutral, _turn(yaw, pitch)), at_rest) for pitch in GRID["pitch"]]
-                         for yaw in GRID["yaw"]])
-        out["grid_residual"] = grid - grid[list(GRID["yaw"]).index(0.0), list(GRID["pitch"]).index(0.0)]
+        residual = np.stack([[_image_residual(seen(neutral, _turn(yaw, pitch)), at_rest) for pitch in grid["pitch"]]
+                             for yaw in grid["yaw"]])
+        out["grid_yaw"], out["grid_pitch"] = np.asarray(grid["yaw"]), np.asarray(grid["pitch"])
+        out["grid_residual"] = residual - residual[list(grid["yaw"]).index(0.0), list(grid["pitch"]).index(0.0)]
         return out
     finally:
         if renderer is not None:
@@ -294,12 +339,12 @@ def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None
         raise InputError(f"{source}: the face is turned more than {TURN_LIMIT:.0f} degrees in every frame it is found in")
     first = np.flatnonzero(good)[:max(1, int(round(NEUTRAL_SECONDS * fps)))]
     neutral = np.median(faces[first], axis=0).astype(np.float64)
-    weights = np.zeros((frames, len(SOLVED)))
+    weights, residual = np.zeros((frames, len(SOLVED))), np.full(frames, np.nan)
     for k in np.flatnonzero(good):
         seen = points(k)
         raw[k], faces[k] = canonical(seen, neutral, RIGID)
         yaw, pitch, _ = basis.true_angles(raw[k:k + 1])[0]
-        weights[k] = _shapes_in_the_image(seen, neutral, basis.image_residual(yaw, pitch), basis)
+        weights[k], residual[k] = _shapes_in_the_image(seen, neutral, basis.image_residual(yaw, pitch), basis)
         if progress:
             progress(1)
     weights, raw, faces = bridged(weights, good), bridged(raw, good), bridged(faces, good)
@@ -311,11 +356,12 @@ def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None
         head, faces = savgol_filter(head, window, ORDER, axis=0), savgol_filter(faces, window, ORDER, axis=0)
     weights[weights < 0.01] = 0.0
     gaze = _gaze(faces[:, LANDMARKS:] - neutral[LANDMARKS:], neutral, basis, weights)
-    return Performance(fps, weights, head, gaze, missing=np.flatnonzero(~found).tolist(),
+    return Performance(fps, weights, head, gaze, residual, missing=np.flatnonzero(~found).tolist(),
                        turned=np.flatnonzero(turned).tolist())
 
 
-def _shapes_in_the_image(points: np.ndarray, neutral: np.ndarray, misread: np.ndarray, basis: Basis) -> np.ndarray:
+def _shapes_in_the_image(points: np.ndarray, neutral: np.ndarray, misread: np.ndarray,
+                         basis: Basis) -> tuple[np.ndarray, float]:
     """One frame's shapes, solved where MediaPipe is surest, in the image: the subject's
     neutral turned, scaled and placed by the similarity fitted at the ``RIGID`` landmarks,
     what MediaPipe's landmarks of a head so turned are off by (``misread``:
@@ -323,7 +369,8 @@ def _shapes_in_the_image(points: np.ndarray, neutral: np.ndarray, misread: np.nd
     solved by bounded least squares with a ridge for the shapes' weights, turned and
     scaled by that fit, and for the fit's small corrections (``_pose_differential``). A
     turned face's hidden side, whose depth MediaPipe guesses, counts only as far as it
-    shows."""
+    shows. Returns the weights, and the landmarks' RMS distance from the solved face (cm
+    on the head, as counted)."""
     from scipy.optimize import lsq_linear
 
     rigid = list(RIGID)
@@ -340,7 +387,9 @@ def _shapes_in_the_image(points: np.ndarray, neutral: np.ndarray, misread: np.nd
                         np.hstack([scale * RIDGE * np.eye(solved), np.zeros((solved, free))])])
     target = np.concatenate([((points[:LANDMARKS, :2] - start) * counts).ravel(), np.zeros(solved)])
     bounds = (np.r_[np.zeros(solved), np.full(free, -np.inf)], np.r_[np.ones(solved), np.full(free, np.inf)])
-    return lsq_linear(design, target, bounds=bounds, method="bvls").x[:solved]
+    solution = lsq_linear(design, target, bounds=bounds, method="bvls").x
+    misfit = (design[:-solved] @ solution - target[:-solved]).reshape(-1, 2)
+    return solution[:solved], float(np.sqrt((misfit**2).sum(axis=1).mean()) / scale)
 
 
 def _pose_differential(turned: np.ndarray) -> np.ndarray:
