@@ -776,6 +776,8 @@ def capture(
     curves: Optional[Path] = typer.Option(None, "--curves", help="also write ARKit's 52 curves and the head's and "
                                           "eyes' rotations, in Live Link Face's CSV layout"),
     plot: Optional[Path] = typer.Option(None, "--plot", help="also draw the main curves over time (.png)"),
+    neutral: float = typer.Option(0.0, "--neutral", help="the time (s) from which the face is at rest and facing "
+                                  "the camera for 0.3 s: expressions and turns are measured from it (default: the start)"),
     force: bool = FORCE,
 ):
     """Capture a performance from a face video: MediaPipe's landmarks per frame, the
@@ -798,8 +800,11 @@ def capture(
         if path is not None:
             check_destination(path, force)
     source = open_source(video, fps)
+    if not 0 <= neutral < source.frames / source.fps:
+        raise InputError(f"--neutral: expected a time within {video} (0-{source.frames / source.fps:.1f} s), got {neutral:g}")
     with progress_bar(3 * source.frames, f"capturing {video.name}") as advance:
-        performance = captured(source, output, curves, plot, replace=force, notice=notice, progress=advance)
+        performance = captured(source, output, curves, plot, replace=force, notice=notice, progress=advance,
+                               neutral_at=neutral)
     moving = int((performance.weights.max(axis=0) >= 0.03).sum())
     written = ", ".join(str(p) for p in (output, curves, plot) if p is not None)
     typer.echo(f"wrote {written}: {performance.frames} frames at {performance.fps:g} fps, {moving} shapes that move, "

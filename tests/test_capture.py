@@ -2,6 +2,7 @@
 pose and the gaze (facesim.capture), checked by round trips: known curves rendered by
 facesim, captured, and compared with the curves that made them."""
 
+import re
 import subprocess
 import sys
 
@@ -144,6 +145,40 @@ def test_the_largest_of_several_faces_is_followed_and_said(round_trip, tmp_path)
     assert np.corrcoef(performance.weights[:, SOLVED.index("jawOpen")], true_jaw)[0, 1] > 0.9
 
 
+#: The round trip's clip cut to start half-way into its first jaw opening (frame 20, the
+#: jaw at 0.5), its first ten frames (at rest, facing the camera) moved to the end.
+NOT_AT_REST = list(range(20, 100)) + list(range(10))
+
+
+def test_a_video_that_does_not_start_at_rest_is_said_and_read_from_the_neutral_given(round_trip, tmp_path):
+    spec, video, performance, _ = round_trip
+    assert performance.unsettled is None and performance.neutral == (0, 7)  # the round trip starts at rest
+    cut = tmp_path / "cut.mp4"
+    iio.imwrite(cut, iio.imread(video)[NOT_AT_REST], fps=FPS, codec="libx264", macro_block_size=1)
+    true = {track.target: track.values(spec.dt, spec.frames)[NOT_AT_REST] for track in spec.timeline}
+
+    def correlation(performance, name):
+        return np.corrcoef(performance.weights[:, SOLVED.index(name)], true[name])[0, 1]
+
+    said = []
+    from_start = capture(cut, tmp_path / "start.yaml", notice=said.append)
+    warned = [s for s in said if "not its usual face" in s]
+    assert len(warned) == 1 and "the lips' gap" in warned[0] and "--neutral" in warned[0], said
+    assert "measured from its face at 0.0-0.3 s" in warned[0], warned
+    suggested = float(re.search(r"most usual from ([0-9.]+) s", warned[0]).group(1))
+    assert suggested >= 2.8, warned  # its frames from 70 on (the clip's 90-99, then 0-9) are at rest
+    assert correlation(from_start, "jawOpen") < 0.8  # measured from a jaw half open: what the notice warns of
+
+    said.clear()
+    given = capture(cut, tmp_path / "given.yaml", notice=said.append, neutral_at=3.2)
+    assert not [s for s in said if "usual face" in s], said
+    assert given.neutral == (80, 87)
+    assert "# expressions measured from the face at 3.20-3.52 s" in (tmp_path / "given.yaml").read_text()
+    correlations = {name: round(correlation(given, name), 3) for name in true}
+    assert min(correlations[name] for name in MAIN) >= 0.9 and np.mean(list(correlations.values())) >= 0.85, correlations
+    assert np.abs(given.head - pose_table(spec)[NOT_AT_REST, :3]).max() <= 3.0
+
+
 @pytest.fixture(scope="module")
 def photo_clips(tmp_path_factory):
     """The round trip's curves on the astronaut's face directory (scikit-image's portrait
@@ -213,6 +248,7 @@ def test_bad_videos_are_one_line_and_nothing_written(tmp_path):
         (["blank.mp4", "-o", "a.txt"], "-o: a.txt: expected a .yaml or .yml file"),
         (["blank.mp4", "-o", "a.yaml", "--curves", "a.yaml"], "--curves: a.yaml: expected a .csv file"),
         (["blank.mp4", "-o", "a.yaml", "--fps", "0"], "--fps: expected frames per second between 0 and 240"),
+        (["blank.mp4", "-o", "a.yaml", "--neutral", "2"], "--neutral: expected a time within blank.mp4 (0-0.4 s), got 2"),
     ]
     before = sorted(p.name for p in tmp_path.iterdir())
     for args, message in cases:

@@ -32,11 +32,13 @@ PLOTTED = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "mouthSmileLeft", "mouthS
 
 
 def capture(source: Source | Path, output: Path, curves: Path | None = None, plot: Path | None = None,
-            replace: bool = False, notice=None, progress=None) -> Performance:
-    """Track ``source`` (``open_source``'s, or a video's path), solve it, and write the
-    spec (``output``), and the CSV curves and the plot when asked, each under a temporary
-    name, read back, renamed. ``progress(n)`` is told of each frame tracked, then each
-    solved, twice (facesim.capture.subject): three times the source's frames in all."""
+            replace: bool = False, notice=None, progress=None, neutral_at: float = 0.0) -> Performance:
+    """Track ``source`` (``open_source``'s, or a video's path), solve it with the subject's
+    neutral taken from ``neutral_at`` seconds on, and write the spec (``output``), and the
+    CSV curves and the plot when asked, each under a temporary name, read back, renamed.
+    ``progress(n)`` is told of each frame tracked, then each solved, twice
+    (facesim.capture.subject): three times the source's frames in all. A neutral that
+    differs from the video's usual face is said through ``notice``."""
     from ..animation.spec import Spec
 
     source = source if isinstance(source, Source) else open_source(source, None)
@@ -45,12 +47,12 @@ def capture(source: Source | Path, output: Path, curves: Path | None = None, plo
     if tracked.several and notice:
         notice(f"{video}: more than one face; following the largest")
     basis = head_basis(Spec(name="capture"))
-    performance = solve(tracked, source.fps, basis, str(video), progress)
+    performance = solve(tracked, source.fps, basis, str(video), progress, neutral_at)
     # the turns' misreading measured on the subject's own face too: the one the frames fit better
-    subject = subject_turns(source, tracked, basis, notice)
+    subject = subject_turns(source, tracked, basis, notice, neutral_at)
     if subject is not None:
         turns, frame = subject
-        theirs = solve(tracked, source.fps, basis.turned_as({**basis.turns, **turns}), str(video), progress)
+        theirs = solve(tracked, source.fps, basis.turned_as({**basis.turns, **turns}), str(video), progress, neutral_at)
         if np.nanmean(theirs.residual) < np.nanmean(performance.residual):
             performance = dataclasses.replace(theirs, turns_read_on=f"the subject's face, fitted to frame {frame}")
     elif progress:
@@ -60,6 +62,11 @@ def capture(source: Source | Path, output: Path, curves: Path | None = None, plo
             if frames:
                 notice(f"{video}: {why} in {len(frames)} frame{'s' if len(frames) > 1 else ''} ({ranges(frames)}); "
                        "bridged from the frames around them")
+        if performance.unsettled:
+            first, last = (k / source.fps for k in (performance.neutral[0], performance.neutral[1] + 1))
+            notice(f"{video}: expressions are measured from its face at {first:.1f}-{last:.1f} s, which is not its "
+                   f"usual face ({performance.unsettled}); it is most usual from {performance.usual_from:.1f} s: if the "
+                   "face is not at rest where it is measured from, give --neutral the time of one that is")
     text = spec_yaml(performance, video)
     with atomic_path(output, replace=replace, verify=_verify_spec(performance.frames)) as tmp:
         tmp.write_text(text)
@@ -129,10 +136,12 @@ def spec_yaml(performance: Performance, video: Path) -> str:
             for name, curve in angles.items() if np.abs(curve).max() >= TOLERANCE["angle"]]
     spec = {"name": video.stem, "frames": performance.frames, "fps": float(fps), "dt": 1.0 / fps, "onset": 0,
             "timeline": timeline, "pose": pose}
+    first, last = performance.neutral
     header = (f"# captured by facesim capture from {video.name}: {performance.frames} frames at {fps:g} fps;\n"
               f"# ARKit's shapes and the head's and eyes' angles (degrees), key-framed by frame; the turned\n"
               f"# head's misreading as measured on {performance.turns_read_on} (the landmarks lie\n"
-              f"# {np.nanmean(performance.residual) * 10:.2f} mm from the solved face on average)\n")
+              f"# {np.nanmean(performance.residual) * 10:.2f} mm from the solved face on average);\n"
+              f"# expressions measured from the face at {first / fps:.2f}-{(last + 1) / fps:.2f} s\n")
     return header + yaml.safe_dump(spec, sort_keys=False, default_flow_style=None, width=120)
 
 

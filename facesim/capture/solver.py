@@ -13,9 +13,13 @@ shapes per frame, solved against facesim's own landmark motion as MediaPipe sees
    onto them, first at the ``RIGID`` landmarks, which expressions barely move. Its
    rotation is the head's yaw, pitch and roll (facesim.geometry.rotation's order), from
    how it faced the camera at first, calibrated by ``TURNS``.
-3. **The subject's own neutral.** The median of the first frames (``NEUTRAL_SECONDS``)
-   in the head's frame is what expressions are measured from, so that a face's shape,
-   anyone's, is not read as an expression: the video should start neutral.
+3. **The subject's own neutral.** The median of the first frames (``NEUTRAL_SECONDS``,
+   from the start or from the time the user gives: ``neutral_frames``) in the head's
+   frame is what expressions are measured from, so that a face's shape, anyone's, is not
+   read as an expression, and the head's turns are measured from how it faced the camera
+   there. A face that is not at rest there would be read wrong without a word, so it is
+   compared with the video's usual face (``at_rest``: the lips' gap, the mouth's width,
+   the brows' and the lids' heights) and the difference is said.
 4. **Shapes, in the image.** The neutral, turned and placed by the frame's pose, plus the
    turned head's misreading, plus the shapes' motion turned with it, is solved against
    the frame's landmarks in the image (x, y: MediaPipe's depth is a guess) by bounded
@@ -50,6 +54,19 @@ from .tracking import IRIS_CENTRES, LANDMARKS, Tracked
 
 #: The seconds at the start taken as the subject's neutral face.
 NEUTRAL_SECONDS = 0.3
+#: What ``at_rest`` compares: each a distance between two landmarks (MediaPipe's indices)
+#: in the head's frame, what it is compared with over the video's frames facing the
+#: camera (its median, or for the lips' gap, which only opens, its 10th percentile), and
+#: by how much (cm on the head) the neutral may differ from that. On five round trips that
+#: start at rest (clay, identity 7, the photo look, --onto, turns only; 2026-12-07) the
+#: neutral frames differed by at most 0.3 mm in the lips' gap and 0.8 mm in the others; a
+#: start with the jaw at 0.5 showed a gap 20 mm wider, one smiling at 0.7 a mouth 15 mm
+#: wider.
+REST_GAUGES = {"the lips' gap": ((13, 14), 10, 0.3), "the mouth's width": ((61, 291), 50, 0.4),
+               "the left brow's height": ((334, 386), 50, 0.3), "the right brow's height": ((105, 159), 50, 0.3),
+               "the left lids' gap": ((386, 374), 50, 0.3), "the right lids' gap": ((159, 145), 50, 0.3)}
+#: The frames ``at_rest`` compares the neutral with: turned less than this (degrees) from it.
+FACING = 8.0
 #: A face turned further than this (degrees, yaw or pitch) is not solved: bridged.
 TURN_LIMIT = 40.0
 #: Landmarks the pose is fitted on (MediaPipe's indices): those ARKit's 52 shapes move
@@ -88,6 +105,9 @@ class Performance:
     turned: list[int] = field(default_factory=list)
     names: tuple[str, ...] = SOLVED
     turns_read_on: str = "facesim's default head"
+    neutral: tuple[int, int] = (0, 0)  # the first and last frame the neutral is taken from
+    unsettled: str | None = None  # how the neutral differs from the video's usual face (``at_rest``)
+    usual_from: float | None = None  # and the time (s) from which the face is most its usual one
 
     @property
     def frames(self) -> int:
@@ -197,13 +217,15 @@ def face_turns(face: Path, grid: dict[str, np.ndarray]) -> dict[str, np.ndarray]
     return _rendered(spec, _landmarks_at_rest(spec)[0], shapes=False, angles=False, look="photo", grid=grid)
 
 
-def turn_grid(tracked: Tracked, fps: float, basis: Basis) -> dict[str, np.ndarray]:
+def turn_grid(tracked: Tracked, fps: float, basis: Basis, neutral_at: float = 0.0) -> dict[str, np.ndarray]:
     """The nodes of ``GRID`` the video's turns span, one node beyond them each way, and 0
-    (the face facing the camera, which the grid is read against)."""
-    found = [k for k, landmarks in enumerate(tracked.landmarks) if landmarks is not None]
-    raw = np.array([canonical(image_to_face_frame(np.asarray(tracked.landmarks[k], dtype=np.float64)), basis.rest)[0]
-                    for k in found])
-    angles = basis.true_angles(raw - np.median(raw[:max(1, int(round(NEUTRAL_SECONDS * fps)))], axis=0))
+    (the face facing the camera, which the grid is read against), the turns measured
+    from the neutral frames (``neutral_frames``)."""
+    found = np.array([landmarks is not None for landmarks in tracked.landmarks])
+    raw = np.zeros((len(found), 3))
+    for k in np.flatnonzero(found):
+        raw[k] = canonical(image_to_face_frame(np.asarray(tracked.landmarks[k], dtype=np.float64)), basis.rest)[0]
+    angles = basis.true_angles(raw[found] - np.median(raw[neutral_frames(found, fps, neutral_at)], axis=0))
     out = {}
     for axis, name in enumerate(("yaw", "pitch")):
         nodes, step = GRID[name], GRID[name][1] - GRID[name][0]
@@ -316,8 +338,45 @@ def bridged(values: np.ndarray, good: np.ndarray) -> np.ndarray:
     return out.reshape(values.shape)
 
 
-def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None) -> Performance:
-    """The performance in ``tracked`` (see the module's steps)."""
+def neutral_frames(found: np.ndarray, fps: float, at: float = 0.0) -> np.ndarray:
+    """The frames the subject's neutral is taken from: the first ``NEUTRAL_SECONDS`` of
+    those ``found`` (frames,) bool, from ``at`` seconds on (the last ones found, if
+    none is found after ``at``)."""
+    count = max(1, int(round(NEUTRAL_SECONDS * fps)))
+    frames = np.flatnonzero(found)
+    later = frames[frames >= int(round(at * fps))]
+    return later[:count] if len(later) else frames[-count:]
+
+
+def at_rest(faces: np.ndarray, angles: np.ndarray, good: np.ndarray, neutral: np.ndarray,
+            fps: float) -> tuple[str | None, float | None]:
+    """How the ``neutral`` frames' face differs from the video's usual one (``REST_GAUGES``,
+    over the ``good`` frames turned less than ``FACING`` from them: ``faces`` (frames,
+    470, 3) in the head's frame, ``angles`` (frames, 3) degrees), and the time (s) from
+    which a stretch as long as the neutral's is nearest the usual face; None, None where
+    the neutral does not differ."""
+    facing = good & (np.abs(angles[:, :2] - np.median(angles[neutral, :2], axis=0)).max(axis=1) < FACING)
+    facing[neutral] = True
+    frames = np.flatnonzero(facing)
+    gauges, away = [], np.zeros(len(frames))
+    for name, ((a, b), percentile, tolerance) in REST_GAUGES.items():
+        size = np.linalg.norm(faces[frames, a] - faces[frames, b], axis=1)
+        usual = np.percentile(size, percentile)
+        ours = float(np.median(np.linalg.norm(faces[neutral, a] - faces[neutral, b], axis=1)))
+        away += np.abs(size - usual) / tolerance
+        if abs(ours - usual) > tolerance:
+            gauges.append(f"{name} {10 * ours:.0f} mm against its usual {10 * usual:.0f}")
+    if not gauges:
+        return None, None
+    count = min(len(neutral), len(frames))  # the window as long as the neutral's nearest the usual face
+    nearest = frames[int(np.argmin(np.convolve(away, np.ones(count) / count, mode="valid")))]
+    return f"{', '.join(gauges)}, scaled to facesim's head", nearest / fps
+
+
+def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None,
+          neutral_at: float = 0.0) -> Performance:
+    """The performance in ``tracked`` (see the module's steps), its neutral taken from
+    ``neutral_at`` seconds on."""
     from scipy.signal import savgol_filter
 
     frames = len(tracked.landmarks)
@@ -331,13 +390,14 @@ def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None
     raw, faces = np.zeros((frames, 3)), np.zeros((frames, LANDMARKS + 2, 3), dtype=np.float32)
     for k in np.flatnonzero(found):
         raw[k], faces[k] = canonical(points(k), basis.rest, RIGID)
-    first = np.flatnonzero(found)[:max(1, int(round(NEUTRAL_SECONDS * fps)))]
+    first = neutral_frames(found, fps, neutral_at)
     raw -= np.median(raw[first], axis=0)  # the turns from how the head faced the camera at first
     turned = found & (np.abs(raw[:, :2]).max(axis=1) > TURN_LIMIT)
     good = found & ~turned
     if not good.any():
         raise InputError(f"{source}: the face is turned more than {TURN_LIMIT:.0f} degrees in every frame it is found in")
-    first = np.flatnonzero(good)[:max(1, int(round(NEUTRAL_SECONDS * fps)))]
+    first = neutral_frames(good, fps, neutral_at)
+    unsettled, usual_from = at_rest(faces, raw, good, first, fps)
     neutral = np.median(faces[first], axis=0).astype(np.float64)
     weights, residual = np.zeros((frames, len(SOLVED))), np.full(frames, np.nan)
     for k in np.flatnonzero(good):
@@ -357,7 +417,8 @@ def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None
     weights[weights < 0.01] = 0.0
     gaze = _gaze(faces[:, LANDMARKS:] - neutral[LANDMARKS:], neutral, basis, weights)
     return Performance(fps, weights, head, gaze, residual, missing=np.flatnonzero(~found).tolist(),
-                       turned=np.flatnonzero(turned).tolist())
+                       turned=np.flatnonzero(turned).tolist(), neutral=(int(first[0]), int(first[-1])),
+                       unsettled=unsettled, usual_from=usual_from)
 
 
 def _shapes_in_the_image(points: np.ndarray, neutral: np.ndarray, misread: np.ndarray,

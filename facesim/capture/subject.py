@@ -3,8 +3,8 @@ differently on every face (the clay head's misreading, allowed for on the astron
 face, read her right eye as squinting whenever she turned), so the head turned by known
 angles is measured on a face fitted to the video's subject.
 
-The video's neutral frame (of its first ``NEUTRAL_SECONDS``, the one whose landmarks are
-nearest their median) goes through ``face from-photo`` (facesim.face.own_face: ICT's
+The video's neutral frame (of its neutral frames, facesim.capture.solver.neutral_frames,
+the one whose landmarks are nearest their median) goes through ``face from-photo`` (facesim.face.own_face: ICT's
 identity fitted to its landmarks, the frame baked into the texture), and that face, in its
 photo look, is turned over the grid's nodes the video's turns span and read as the
 default head is (facesim.capture.solver.face_turns, turn_grid). The tables are kept in
@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .solver import LANDMARKS, NEUTRAL_SECONDS
+from .solver import LANDMARKS, neutral_frames
 from .tracking import Source, Tracked, frames_of
 
 #: A face is fitted at least this many pixels across (its landmarks' extent): a smaller
@@ -31,7 +31,8 @@ from .tracking import Source, Tracked, frames_of
 FIT_SIZE = 200
 
 
-def subject_turns(source: Source, tracked: Tracked, basis, notice=None) -> tuple[dict[str, np.ndarray], int] | None:
+def subject_turns(source: Source, tracked: Tracked, basis, notice=None,
+                  neutral_at: float = 0.0) -> tuple[dict[str, np.ndarray], int] | None:
     """The turned head's misreading (facesim.capture.solver.face_turns) on a face fitted to
     the video's neutral frame, over the turns the video makes (``turn_grid``, the default
     head's ``basis`` reading them), and that frame's index; None, said through ``notice``,
@@ -41,7 +42,7 @@ def subject_turns(source: Source, tracked: Tracked, basis, notice=None) -> tuple
     from ..face import own_face
     from . import solver
 
-    k, size = _neutral_frame(tracked, source.fps)
+    k, size = _neutral_frame(tracked, source.fps, neutral_at)
     image = next(frame for index, frame in enumerate(frames_of(source)) if index == k)
     enlarged = max(1, math.ceil(FIT_SIZE / size))
     if enlarged > 1:
@@ -49,7 +50,7 @@ def subject_turns(source: Source, tracked: Tracked, basis, notice=None) -> tuple
 
         height, width = image.shape[:2]
         image = np.asarray(Image.fromarray(image).resize((width * enlarged, height * enlarged), Image.LANCZOS))
-    grid = solver.turn_grid(tracked, source.fps, basis)
+    grid = solver.turn_grid(tracked, source.fps, basis, neutral_at)
     parts = [np.ascontiguousarray(image).tobytes(), str(image.shape).encode(), grid["yaw"].tobytes(),
              grid["pitch"].tobytes(), VERSION.encode(),
              Path(solver.__file__).read_bytes(), Path(own_face.__file__).read_bytes(), Path(__file__).read_bytes()]
@@ -72,16 +73,15 @@ def subject_turns(source: Source, tracked: Tracked, basis, notice=None) -> tuple
         return None
 
 
-def _neutral_frame(tracked: Tracked, fps: float) -> tuple[int, float]:
-    """Of the first ``NEUTRAL_SECONDS`` of frames with a face, the one whose landmarks
-    (centred and scaled) lie nearest their median; and its face's size in pixels."""
-    found = [k for k, landmarks in enumerate(tracked.landmarks) if landmarks is not None]
-    first = found[:max(1, int(round(NEUTRAL_SECONDS * fps)))]
+def _neutral_frame(tracked: Tracked, fps: float, neutral_at: float) -> tuple[int, float]:
+    """Of the neutral frames (``neutral_frames``), the one whose landmarks (centred and
+    scaled) lie nearest their median; and its face's size in pixels."""
+    first = neutral_frames(np.array([landmarks is not None for landmarks in tracked.landmarks]), fps, neutral_at)
     shapes = []
     for k in first:
         points = np.asarray(tracked.landmarks[k][:LANDMARKS, :2], dtype=np.float64)
         points = points - points.mean(axis=0)
         shapes.append(points / np.linalg.norm(points))
     shapes = np.array(shapes)
-    k = first[int(np.argmin(np.linalg.norm(shapes - np.median(shapes, axis=0), axis=(1, 2))))]
+    k = int(first[int(np.argmin(np.linalg.norm(shapes - np.median(shapes, axis=0), axis=(1, 2))))])
     return k, float(np.ptp(tracked.landmarks[k][:LANDMARKS, :2], axis=0).max())
