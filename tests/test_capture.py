@@ -14,6 +14,7 @@ import facesim
 from facesim.animation.spec import Spec, load_spec, pose_table
 from facesim.capture.performance import capture
 from facesim.capture.solver import SOLVED
+from facesim.errors import InputError
 from facesim.renderer.settings import RenderSettings
 
 pytest.importorskip("mediapipe")
@@ -177,6 +178,14 @@ def test_a_video_that_does_not_start_at_rest_is_said_and_read_from_the_neutral_g
     correlations = {name: round(correlation(given, name), 3) for name in true}
     assert min(correlations[name] for name in MAIN) >= 0.9 and np.mean(list(correlations.values())) >= 0.85, correlations
     assert np.abs(given.head - pose_table(spec)[NOT_AT_REST, :3]).max() <= 3.0
+
+    frames = iio.imread(cut)
+    frames[70:] = 235  # the face gone from 2.8 s on
+    gone = tmp_path / "gone.mp4"
+    iio.imwrite(gone, frames, fps=FPS, codec="libx264", macro_block_size=1)
+    with pytest.raises(InputError, match=r"gone.mp4: no face found from 3 s on, where --neutral"):
+        capture(gone, tmp_path / "gone.yaml", neutral_at=3.0)
+    assert not (tmp_path / "gone.yaml").exists()
 
 
 @pytest.fixture(scope="module")

@@ -340,12 +340,10 @@ def bridged(values: np.ndarray, good: np.ndarray) -> np.ndarray:
 
 def neutral_frames(found: np.ndarray, fps: float, at: float = 0.0) -> np.ndarray:
     """The frames the subject's neutral is taken from: the first ``NEUTRAL_SECONDS`` of
-    those ``found`` (frames,) bool, from ``at`` seconds on (the last ones found, if
-    none is found after ``at``)."""
-    count = max(1, int(round(NEUTRAL_SECONDS * fps)))
+    those ``found`` (frames,) bool, from ``at`` seconds on (none, if none is found from
+    there on)."""
     frames = np.flatnonzero(found)
-    later = frames[frames >= int(round(at * fps))]
-    return later[:count] if len(later) else frames[-count:]
+    return frames[frames >= int(round(at * fps))][:max(1, int(round(NEUTRAL_SECONDS * fps)))]
 
 
 def at_rest(faces: np.ndarray, angles: np.ndarray, good: np.ndarray, neutral: np.ndarray,
@@ -391,12 +389,17 @@ def solve(tracked: Tracked, fps: float, basis: Basis, source: str, progress=None
     for k in np.flatnonzero(found):
         raw[k], faces[k] = canonical(points(k), basis.rest, RIGID)
     first = neutral_frames(found, fps, neutral_at)
+    if not len(first):
+        raise InputError(f"{source}: no face found from {neutral_at:g} s on, where --neutral takes the face at rest")
     raw -= np.median(raw[first], axis=0)  # the turns from how the head faced the camera at first
     turned = found & (np.abs(raw[:, :2]).max(axis=1) > TURN_LIMIT)
     good = found & ~turned
     if not good.any():
         raise InputError(f"{source}: the face is turned more than {TURN_LIMIT:.0f} degrees in every frame it is found in")
     first = neutral_frames(good, fps, neutral_at)
+    if not len(first):
+        raise InputError(f"{source}: the face is turned more than {TURN_LIMIT:.0f} degrees in every frame from "
+                         f"{neutral_at:g} s on, where --neutral takes the face at rest")
     unsettled, usual_from = at_rest(faces, raw, good, first, fps)
     neutral = np.median(faces[first], axis=0).astype(np.float64)
     weights, residual = np.zeros((frames, len(SOLVED))), np.full(frames, np.nan)
