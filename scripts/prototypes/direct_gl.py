@@ -2,18 +2,17 @@
 Only the default path: a head figure, clay look, perspective camera, EGL, edge filter.
 Usage: python direct.py [compare|render ARGS...]"""
 import ctypes
-import os
 import sys
 import time
 from pathlib import Path
 
 T0 = time.perf_counter()
+import importlib.util  # noqa: E402
+
 import numpy as np  # noqa: E402
 
 from facesim.renderer import scene as S  # noqa: E402
 from facesim.renderer.backend import LIT_SHADER, use_backend  # noqa: E402
-
-import importlib.util  # noqa: E402
 
 # pyrender's mesh.vert, read from its package without importing it
 SHADERS = Path(importlib.util.find_spec("pyrender").submodule_search_locations[0]) / "shaders"
