@@ -117,7 +117,7 @@ def machine() -> str:
     import scipy
 
     versions = {"python": platform.python_version(), "numpy": np.__version__, "numba": numba.__version__, "scipy": scipy.__version__}
-    for name in ("pyrender2", "PyOpenGL", "imageio-ffmpeg"):
+    for name in ("PyOpenGL", "imageio-ffmpeg"):
         try:
             from importlib.metadata import version
 
@@ -510,7 +510,7 @@ for _ in range(repeats):
     ours.append((time.perf_counter() - t) / frames)
     # the floor: the same scene, the same renderer, settings and antialiasing, nothing updated
     t = time.perf_counter()
-    for _ in range(frames): r._antialiased(r._renderer.render(r._scene, flags=r._flags)[0])
+    for _ in range(frames): r._antialiased(r._drawn((np.zeros(3), [])))
     floor.append((time.perf_counter() - t) / frames)
 print(json.dumps(dict(ours=statistics.median(ours), floor=statistics.median(floor), backend=r.backend)))
 """
@@ -535,7 +535,7 @@ def rendering(sizes: list[int], repeats: int, frames: int) -> tuple[str, dict]:
             r = python_json(RENDER_FLOOR_CODE.format(size=size, repeats=repeats, backend=backend, face=THESIS_FACE))
             figures[(backend, size)] = r
             rows.append([backend, f"{size}²", f"{r['ours'] * 1e3:.1f}", f"{r['floor'] * 1e3:.1f}", f"{r['ours'] / r['floor']:.2f}"])
-    text = table(["backend", "size", "facesim per frame (ms)", "bare pyrender floor (ms)", "ratio"], rows)
+    text = table(["backend", "size", "facesim per frame (ms)", "bare draw floor (ms)", "ratio"], rows)
     processes = python_json(PROCESSES_CODE.format(frames=frames, face=THESIS_FACE))
     text += "\n\n" + table([f"{frames} frames at 512², processes", "wall (s)", "frames per second"],
                            [[jobs, f"{t:.2f}", f"{frames / t:.1f}"] for jobs, t in processes.items()])
@@ -572,14 +572,14 @@ for k in range(a.frames):
     _vertex_normals(x, r._faces, r._normals)
     buffers.append([np.hstack([x[rows], r._normals[rows], attribute]).astype(np.float32) for _, rows, attribute in r._parts])
 for k in range(3): r.frame(a, k)
-from pyrender.shader_program import ShaderProgramCache
-programs = dict(lit=r._renderer._renderer._program_cache, pbr=ShaderProgramCache())  # facesim's lit shader, pyrender's
+import importlib.util
+from facesim.renderer.backend import LIT_SHADER
+# facesim's lit shader, and pyrender's own (read from its package: a test dependency)
+programs = dict(lit=LIT_SHADER, pbr=Path(importlib.util.find_spec("pyrender").submodule_search_locations[0]) / "shaders" / "mesh.frag")
 
 def floor_frame(data, programs):
-    r._renderer._renderer._program_cache = programs
-    for (primitive, _, _), d in zip(r._parts, data):
-        r._upload(primitive, d)
-    r._antialiased(r._renderer.render(r._scene, flags=r._flags)[0])
+    r.lit_shader = programs
+    r._antialiased(r._drawn((np.zeros(3), [(primitive, d) for (primitive, _, _), d in zip(r._parts, data)])))
 
 floor_frame(buffers[0], programs["pbr"])
 ours, floor, pbr, encode = [], [], [], []
@@ -590,7 +590,7 @@ for _ in range(repeats):
         for data in buffers:
             floor_frame(data, programs[which])
         times.append((time.perf_counter() - t) / a.frames)
-    r._renderer._renderer._program_cache = programs["lit"]
+    r.lit_shader = programs["lit"]
     t = time.perf_counter(); write_frames(frames, Path(tempfile.mkdtemp()) / "head.mp4", "mp4", 25); encode.append(time.perf_counter() - t)
 r.close()
 # end to end as `facesim render` runs it: simulated in the background while drawn, each frame encoded while the next draws
@@ -661,7 +661,7 @@ def head(sizes: list[int], repeats: int) -> tuple[str, dict]:
                      f"{h['ours'] / h['floor']:.2f}", f"{h['pbr'] * 1e3:.1f}", f"{h['pbr'] / h['floor']:.2f}x",
                      f"{h['encode'] * 1e3:.0f}", f"{h['fps']:.1f}", f"{h['fps_supersample']:.1f}", f"{h['fps_plain']:.1f}"])
     h = figures[sizes[-1]]
-    text = table(["size", "happy, 35 frames, simulation (ms)", "facesim per frame (ms)", "bare pyrender floor (ms)",
+    text = table(["size", "happy, 35 frames, simulation (ms)", "facesim per frame (ms)", "bare draw floor (ms)",
                   "ratio", "the floor with pyrender's PBR shader (ms)", "its cost against facesim's lit shader",
                   "MP4 encode alone (ms)", "end-to-end fps", "end-to-end fps, --supersample",
                   "end-to-end fps, --no-antialias"], rows)
@@ -1207,7 +1207,7 @@ def main() -> int:
             "stays in the mesh's numbering. The four models alternate, each the median of "
             f"{repeats} runs; the scaling table above is in facesim's order.")
     text, render_figures = rendering([64] if quick else [256, 512, 1024], 1 if quick else 3, 12 if quick else 70)
-    section("Rendering: facesim against the bare pyrender floor", text + "\n\nThe floor renders the same scene "
+    section("Rendering: facesim against the bare draw floor", text + "\n\nThe floor renders the same scene "
             "with the same renderer and settings, antialiased the same way (the edge filter), and updates nothing; "
             "facesim's frame adds the vertex normals (Numba) and the in-place vertex-buffer upload; its frames "
             "are drawn as `facesim render` draws an animation (FaceRenderer.frames: each frame's arrays computed, "

@@ -1,5 +1,5 @@
-"""Offscreen rendering of face animations with pyrender (the maintained ``pyrender2``),
-on a machine with no display and no GPU: OSMesa or Mesa's software EGL.
+"""Offscreen rendering of face animations with OpenGL (facesim.renderer.gl), on a machine
+with no display and no GPU: OSMesa or Mesa's software EGL.
 
 One :class:`FaceRenderer` per process is built once and reused for every frame: the
 scene (skin, eyeballs with iris and pupil behind the eye openings, a dark mouth cavity
@@ -9,8 +9,10 @@ normals), never the scene, and the head and eye nodes get their pose: the head t
 rigid body about a pivot at the neck (yaw, pitch, roll), the eyeballs about their centres
 (gaze yaw, pitch), under a fixed camera and fixed lights.
 
+It draws what pyrender drew, byte for byte (its shaders, its state per part, its draw
+order: solid parts farthest node first, then blended ones), without importing it.
 ``PYOPENGL_PLATFORM`` must be set before anything imports OpenGL, so nothing here imports
-pyrender until :func:`use_backend` has chosen the platform.
+OpenGL until :func:`use_backend` has chosen the platform.
 """
 
 from __future__ import annotations
@@ -24,19 +26,8 @@ from ..face.colours import IRIS, MOUTH, PUPIL, SCLERA, SKIN
 from ..geometry import _vertex_normals, rotation
 from ..physics.mesh import FaceMesh
 from ..physics.rig import eyeball
-from .backend import (
-    _collection_paused,
-    _colour_only,
-    _in_own_context,
-    _lit_shader,
-    _share_egl_display,
-    _single_sample,
-    _stable_draw_order,
-    backend_available,
-    offscreen_pyrender,
-    use_backend,
-)
-from .camera import _fitted_camera, _look_at, _pose
+from .backend import LIT_SHADER, backend_available, use_backend
+from .camera import _fitted_camera, _look_at, _perspective, _pose
 from .filters import _downsample, _interleave, _smooth_edges
 from .settings import (
     _LIBRARIES,
@@ -73,6 +64,30 @@ def _openings(rest: np.ndarray, faces: np.ndarray) -> tuple[list[np.ndarray], np
     return eyes, (loops[mouth] if mouth is not None else None)
 
 
+class _Node:
+    """A pose in the scene: the head's, or an eyeball's within the head (``parent``)."""
+
+    def __init__(self, pose: np.ndarray, parent: "_Node | None" = None):
+        self.pose, self.parent = pose, parent
+
+    def world(self) -> np.ndarray:
+        return self.pose if self.parent is None else self.parent.world() @ self.pose
+
+
+class _Part:
+    """A primitive (facesim.renderer.gl.Primitive) on a node, drawn with a material as
+    pyrender's MetallicRoughnessMaterial: ``colour`` (its base colour factor), metallic,
+    roughness, emissive, a texture, blended (alphaMode BLEND) or not, double-sided or
+    culled; ``see_through``: drawn after the solid parts (pyrender's transparency)."""
+
+    def __init__(self, primitive, node, colour=(1.0, 1.0, 1.0, 1.0), metallic=1.0, roughness=1.0, emissive=(0.0, 0.0, 0.0),
+                 texture=None, blended=False, double_sided=False, see_through=False, defines=()):
+        self.primitive, self.node = primitive, node
+        self.colour, self.metallic, self.roughness, self.emissive = colour, metallic, roughness, emissive
+        self.texture, self.blended, self.double_sided, self.see_through = texture, blended, double_sided, see_through
+        self.defines = dict(defines)
+
+
 def _texture_vertices(triangles: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A textured part's vertices, one per (figure vertex, texture coordinate) pair: a
     vertex where the atlas's islands meet has several. Returns (m,) their figure rows,
@@ -83,7 +98,10 @@ def _texture_vertices(triangles: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray
 
 
 class FaceRenderer:
-    """A pyrender scene of one face, rendered offscreen frame after frame."""
+    """One face drawn offscreen frame after frame, in a GL context of its own."""
+
+    #: The fragment shader of lit parts (a test draws with pyrender's own instead).
+    lit_shader = LIT_SHADER
 
     def __init__(self, rest: np.ndarray, faces: np.ndarray, settings: RenderSettings = RenderSettings(), backend: str = "auto",
                  figure=None, face=None):
@@ -93,47 +111,63 @@ class FaceRenderer:
         face directory of that head, for the photo look and --onto."""
         settings = settings.for_face(None if figure is None else face)
         self.backend = use_backend(backend)
-        pyrender = offscreen_pyrender()
-        import trimesh
-
         self.settings = settings
-        self._pyrender = pyrender
         self._figure = figure
-        self._head = pyrender.Node(name="head", matrix=np.eye(4))
-        scene = pyrender.Scene(bg_color=BACKGROUND, ambient_light=(0.28, 0.26, 0.26))
-        scene.add_node(self._head)
-        _stable_draw_order(scene)
-        self._eyes: list[tuple] = []
-        if figure is None:
-            self._faces = np.ascontiguousarray(faces, dtype=np.int64)
-            self._normals = np.empty_like(rest)
-            _vertex_normals(rest, self._faces, self._normals)
-            skin = pyrender.MetallicRoughnessMaterial(baseColorFactor=SKIN, metallicFactor=0.0, roughnessFactor=0.75, doubleSided=True)
-            self._face = pyrender.Primitive(positions=rest, normals=self._normals, indices=self._faces, material=skin)
-            scene.add(pyrender.Mesh([self._face]), parent_node=self._head)
-            self._add_eyes_and_mouth(scene, rest, faces, pyrender, trimesh)
-            low, high = rest.min(axis=0), rest.max(axis=0)
-            # The head turns about the top of the spine: behind the jaw, on the mask's back plane.
-            self._neck = np.array([(low[0] + high[0]) / 2, low[1] + NECK_HEIGHT * (high[1] - low[1]), low[2]])
-            framed = rest
-        else:
-            self._add_figure(scene, figure, pyrender, face if settings.look == "photo" else None)
-            self._neck = figure.neck
-            framed = rest if settings.framing == "face" else figure.rest
-        self._arrows = self._lines(scene, np.repeat(rest, 2, axis=0), ARROW) if settings.show_muscles else None
-        # two sets of the arrays a frame writes before its upload, for ``frames``' two frames in flight
-        arrays = getattr(self, "_vertex_arrays", [])
-        self._slots = [(self._normals, arrays), (np.empty_like(self._normals), [np.empty_like(a) for a in arrays])]
-        # A head's wireframe is its simulation mesh, drawn over the skin it drives.
-        self._edges = FaceMesh(rest, faces).edges if figure is not None and settings.wireframe else None
-        self._wire = None if self._edges is None else self._lines(scene, rest[self._edges.ravel()], WIRE)
-
+        self._context = None
         # lines (wireframe, arrows) are one pixel wide: supersampled they would fade to half
         lines = settings.wireframe or settings.show_muscles
         supersample = (settings.antialias and settings.supersample and not lines
                        and max(settings.width, settings.height) <= SUPERSAMPLE_LIMIT)
         self._factor = SUPERSAMPLE if supersample else 1
         self._smooth = settings.antialias and not lines and not supersample
+        multisampled = settings.antialias and not supersample and not self._smooth  # lines, antialiased
+        self._flat = settings.look == "photo"
+        self._rgba = settings.onto is not None
+        self._polygon_lines = settings.wireframe and figure is None
+        try:
+            from . import gl
+
+            self._context = gl.Context(self.backend)
+            self._context.make_current()
+            self._framebuffer = gl.Framebuffer(self._factor * settings.width, self._factor * settings.height,
+                                               4 if multisampled else 0)
+        except RenderError:
+            raise
+        except Exception as exc:
+            raise RenderError(
+                f"cannot open an offscreen GL context with {self.backend} ({type(exc).__name__}: {exc}); "
+                "install Debian's libosmesa6 or try --backend egl"
+            ) from None
+        self._gl = gl
+        self._programs: dict = {}
+        self._head = _Node(np.eye(4))
+        self._parts: list = []  # a figure's: (part, rows, attribute)
+        self._drawn_parts: list[_Part] = []
+        self._eyes: list[tuple] = []
+        if figure is None:
+            self._faces = np.ascontiguousarray(faces, dtype=np.int64)
+            self._normals = np.empty_like(rest)
+            _vertex_normals(rest, self._faces, self._normals)
+            self._face = gl.Primitive(np.hstack([rest, self._normals]), [(1, 3)], self._faces)
+            self._drawn_parts.append(_Part(self._face, self._head, SKIN, metallic=0.0, roughness=0.75, double_sided=True,
+                                           defines=dict(NORMAL_LOC=1)))
+            self._add_eyes_and_mouth(rest, faces)
+            low, high = rest.min(axis=0), rest.max(axis=0)
+            # The head turns about the top of the spine: behind the jaw, on the mask's back plane.
+            self._neck = np.array([(low[0] + high[0]) / 2, low[1] + NECK_HEIGHT * (high[1] - low[1]), low[2]])
+            framed = rest
+        else:
+            self._add_figure(figure, face if settings.look == "photo" else None)
+            self._neck = figure.neck
+            framed = rest if settings.framing == "face" else figure.rest
+        self._arrows = self._lines(np.repeat(rest, 2, axis=0), ARROW) if settings.show_muscles else None
+        # two sets of the arrays a frame writes before its upload, for ``frames``' two frames in flight
+        arrays = getattr(self, "_vertex_arrays", [])
+        self._slots = [(self._normals, arrays), (np.empty_like(self._normals), [np.empty_like(a) for a in arrays])]
+        # A head's wireframe is its simulation mesh, drawn over the skin it drives.
+        self._edges = FaceMesh(rest, faces).edges if figure is not None and settings.wireframe else None
+        self._wire = None if self._edges is None else self._lines(rest[self._edges.ravel()], WIRE)
+
         centre = (framed.min(axis=0) + framed.max(axis=0)) / 2
         extent = np.ptp(framed, axis=0)
         fov = np.radians(25.0)
@@ -143,54 +177,41 @@ class FaceRenderer:
         self._centre, self._distance, self._yaw = centre, distance, yaw
         self._toward_camera = WIRE_LIFT * (eye - centre) / np.linalg.norm(eye - centre)
         self._backdrop = None
+        width, height = self._factor * settings.width, self._factor * settings.height
         if settings.onto is None:
-            camera = pyrender.PerspectiveCamera(yfov=fov, aspectRatio=settings.width / settings.height, znear=1.0, zfar=10 * distance)
-            self._camera = scene.add(camera, pose=_look_at(eye, centre))
+            self._projection = _perspective(fov, settings.width / settings.height, 1.0, 10 * distance)
+            self._camera = _look_at(eye, centre)
         else:
             from ..face.own_face import onto_photo
 
             self._backdrop, fitted = onto_photo(face, settings.onto, (settings.width, settings.height))
-            view, pose = _fitted_camera(fitted, self._factor, pyrender)
-            self._camera = scene.add(view, pose=pose)
-        self._lights = [
-            scene.add(pyrender.DirectionalLight(color=(1.0, 0.97, 0.92), intensity=KEY_LIGHT),
-                      pose=_look_at(centre + KEY_DIRECTION, centre)),
-            scene.add(pyrender.DirectionalLight(color=(0.85, 0.9, 1.0), intensity=FILL_LIGHT),
-                      pose=_look_at(centre + FILL_DIRECTION, centre)),
-        ]
-        self._scene = scene
-        with _collection_paused():  # the context is current from its creation to the first frame
-            try:
-                self._renderer = pyrender.OffscreenRenderer(self._factor * settings.width, self._factor * settings.height)
-            except Exception as exc:
-                raise RenderError(
-                    f"cannot open an offscreen GL context with {self.backend} ({type(exc).__name__}: {exc}); "
-                    "install Debian's libosmesa6 or try --backend egl"
-                ) from None
-            _share_egl_display(self._renderer)
-            multisampled = settings.antialias and not supersample and not self._smooth  # lines, antialiased
-            if not multisampled:
-                _single_sample(self._renderer._renderer)
-            _lit_shader(self._renderer._renderer, len(self._lights))
-            if settings.onto is None:
-                _colour_only(self._renderer._renderer, multisampled)
-            wireframe = settings.wireframe and figure is None
-            self._flags = pyrender.RenderFlags.ALL_WIREFRAME if wireframe else pyrender.RenderFlags.NONE
-            if settings.look == "photo":
-                self._flags |= pyrender.RenderFlags.FLAT
-            if settings.onto is not None:
-                self._flags |= pyrender.RenderFlags.RGBA
-            self._renderer.render(self._scene, flags=self._flags)  # uploads the buffers once
+            self._projection, self._camera = _fitted_camera(fitted, self._factor, width, height)
+        self._lights = [[np.array((1.0, 0.97, 0.92)), KEY_LIGHT, -_look_at(centre + KEY_DIRECTION, centre)[:3, 2]],
+                        [np.array((0.85, 0.9, 1.0)), FILL_LIGHT, -_look_at(centre + FILL_DIRECTION, centre)[:3, 2]]]
+        self._light_scale = 1.0
 
-    def _lines(self, scene, points: np.ndarray, colour):
+    def _program(self, part: _Part):
+        """The program that draws ``part`` (pyrender's choice: its lit shader, here
+        facesim's, or its unlit one for the photo look), compiled once per set of defines."""
+        fragment = "flat.frag" if self._flat else str(self.lit_shader)
+        defines = dict(part.defines, INST_M_LOC=part.primitive.instance, USE_METALLIC_MATERIAL=1)
+        if not self._flat:  # pyrender's room for four lights of each kind; facesim's two, a constant
+            defines.update(MAX_DIRECTIONAL_LIGHTS=4, MAX_SPOT_LIGHTS=4, MAX_POINT_LIGHTS=4,
+                           DIRECTIONAL_LIGHTS=len(self._lights))
+        key = (fragment, tuple(sorted(defines.items())))
+        if key not in self._programs:
+            self._programs[key] = self._gl.Program("mesh.vert", fragment, defines)
+        return self._programs[key]
+
+    def _lines(self, points: np.ndarray, colour):
         """Line segments (point pairs) in one unlit colour, moved with the head."""
-        pyrender = self._pyrender
-        lines = pyrender.Primitive(positions=points, mode=pyrender.constants.GLTF.LINES,
-                                   material=pyrender.MetallicRoughnessMaterial(baseColorFactor=colour, emissiveFactor=colour[:3]))
-        scene.add(pyrender.Mesh([lines]), parent_node=self._head)
+        from OpenGL import GL
+
+        lines = self._gl.Primitive(points, [], mode=GL.GL_LINES)
+        self._drawn_parts.append(_Part(lines, self._head, colour, emissive=colour[:3]))
         return lines
 
-    def _add_figure(self, scene, figure, pyrender, face=None) -> None:
+    def _add_figure(self, figure, face=None) -> None:
         """One primitive per part of the figure, each over its own vertices, coloured per
         vertex; smooth normals over the whole figure, so seams between parts that share
         vertices (face, scalp, neck) do not show. With ``face`` (the photo look) the parts
@@ -198,6 +219,7 @@ class FaceRenderer:
         atlas's islands meet (``_texture_vertices``); of the eyelashes only the upper are
         drawn (``Figure.upper_lashes``), and the other parts' colours are shaded once at rest
         (``PHOTO_AMBIENT``), the whole drawn unlit."""
+        gl = self._gl
         self._faces = np.ascontiguousarray(figure.triangles, dtype=np.int64)
         self._normals = np.empty_like(figure.rest)
         _vertex_normals(figure.rest, self._faces, self._normals)
@@ -211,9 +233,7 @@ class FaceRenderer:
             # No mipmaps: the atlas is the photo magnified several times (the face's 1024 texels
             # against its hundreds of pixels), so it has nothing to alias, and mipmaps average
             # across the islands' seams (they showed as dotted lines along them)
-            linear = pyrender.Sampler(magFilter=pyrender.constants.GLTF.LINEAR, minFilter=pyrender.constants.GLTF.LINEAR)
-            texture = pyrender.Texture(source=image, source_channels="RGBA" if image.shape[2] == 4 else "RGB", sampler=linear)
-        self._parts = []
+            texture = gl.Texture(image)
         # Back faces are culled but for the see-through eyelashes, cards seen from both
         # sides: a frame draws 12-15% faster (llvmpipe, 512², measured on 2026-12-02) and
         # differs only where a back face peeked past a silhouette, a few pixels of a few
@@ -229,27 +249,32 @@ class FaceRenderer:
                 part = figure.upper_lashes(part)
             if texture is not None and part.uv is not None:
                 rows, uv, local = _texture_vertices(part.triangles, part.uv)
-                material = pyrender.MetallicRoughnessMaterial(baseColorTexture=texture, metallicFactor=0.0, doubleSided=False)
-                primitive = pyrender.Primitive(positions=figure.rest[rows], normals=self._normals[rows], texcoord_0=uv,
-                                               indices=local, material=material)
-                attribute = uv
+                attribute = np.asarray(uv, dtype=np.float32)
+                primitive = gl.Primitive(np.hstack([figure.rest[rows], self._normals[rows], attribute]), [(1, 3), (2, 2)], local)
+                drawn = _Part(primitive, self._head, metallic=0.0, texture=texture,
+                              defines=dict(NORMAL_LOC=1, TEXCOORD_0_LOC=2, HAS_BASE_COLOR_TEX=1))
             else:
                 rows, local = np.unique(part.triangles, return_inverse=True)
                 colour = figure.colour[rows].copy()
                 if face is not None:
                     colour[:, :3] *= shade[rows, None]
                 see_through = bool((colour[:, 3] < 1).any())  # eyelashes fade to their tips
-                material = pyrender.MetallicRoughnessMaterial(baseColorFactor=(1.0, 1.0, 1.0, 1.0), metallicFactor=0.0,
-                                                              roughnessFactor=part.roughness, doubleSided=see_through,
-                                                              alphaMode="BLEND" if see_through else "OPAQUE")
-                primitive = pyrender.Primitive(positions=figure.rest[rows], normals=self._normals[rows], color_0=colour,
-                                               indices=local.reshape(-1, 3), material=material)
-                attribute = colour
-            scene.add(pyrender.Mesh([primitive]), parent_node=self._head)
-            self._parts.append((primitive, rows, np.asarray(attribute, dtype=np.float32)))
+                attribute = np.asarray(colour, dtype=np.float32)
+                primitive = gl.Primitive(np.hstack([figure.rest[rows], self._normals[rows], attribute]), [(1, 3), (2, 4)],
+                                         local.reshape(-1, 3))
+                drawn = _Part(primitive, self._head, metallic=0.0, roughness=part.roughness, blended=see_through,
+                              double_sided=see_through, see_through=see_through, defines=dict(NORMAL_LOC=1, COLOR_0_LOC=2))
+            self._drawn_parts.append(drawn)
+            self._parts.append((primitive, rows, attribute))
         self._vertex_arrays = [np.empty((len(rows), 6 + attribute.shape[1]), dtype=np.float32) for _, rows, attribute in self._parts]
 
-    def _add_eyes_and_mouth(self, scene, rest, faces, pyrender, trimesh) -> None:
+    def _add_eyes_and_mouth(self, rest, faces) -> None:
+        """A mask's eyeballs (iris and pupil toward +z, each on a node of its own that the
+        gaze turns) and the dark mouth cavity behind its lips: trimesh's icospheres, drawn
+        as pyrender drew trimesh's meshes (smooth normals, vertex colours blended)."""
+        import trimesh
+
+        gl = self._gl
         eyes, mouth = _openings(rest, faces)
         for loop in eyes:
             centre, radius = eyeball(rest[loop])
@@ -257,8 +282,11 @@ class FaceRenderer:
             angle = np.arccos(np.clip(ball.vertices[:, 2] / radius, -1, 1))
             colours = np.where((angle < 0.2)[:, None], PUPIL, np.where((angle < 0.46)[:, None], IRIS, SCLERA))
             ball.visual.vertex_colors = (np.asarray(colours) * 255).astype(np.uint8)
-            node = scene.add(pyrender.Mesh.from_trimesh(ball, smooth=True), pose=_pose(np.eye(3), centre),
-                             parent_node=self._head)
+            colours = ball.visual.vertex_colors / 255.0  # RGBA, as pyrender took trimesh's colours
+            primitive = gl.Primitive(np.hstack([ball.vertices, ball.vertex_normals, colours]), [(1, 3), (2, 4)], ball.faces)
+            node = _Node(_pose(np.eye(3), centre), self._head)
+            self._drawn_parts.append(_Part(primitive, node, metallic=0.2, roughness=0.8, blended=True,
+                                           defines=dict(NORMAL_LOC=1, COLOR_0_LOC=2)))
             self._eyes.append((node, centre))
         if mouth is not None:
             points = rest[mouth]
@@ -266,33 +294,27 @@ class FaceRenderer:
             # deep and tall enough to fill the opening when the jaw drops (facesim.physics.rig)
             cavity.apply_scale([0.6 * np.ptp(points[:, 0]), 2.4, 1.0])
             cavity.apply_translation(points.mean(axis=0) - np.array([0.0, 0.9, 1.9]))
-            material = pyrender.MetallicRoughnessMaterial(baseColorFactor=MOUTH, metallicFactor=0.0, roughnessFactor=1.0)
-            scene.add(pyrender.Mesh.from_trimesh(cavity, material=material, smooth=True), parent_node=self._head)
+            primitive = gl.Primitive(np.hstack([cavity.vertices, cavity.vertex_normals]), [(1, 3)], cavity.faces)
+            self._drawn_parts.append(_Part(primitive, _Node(np.eye(4), self._head), MOUTH, metallic=0.0, roughness=1.0,
+                                           defines=dict(NORMAL_LOC=1)))
 
     def view(self, yaw: float = 0.0, pitch: float = 0.0, light: float = 1.0) -> None:
         """Turn the camera about the face by yaw and pitch (degrees, added to the preset)
         and scale the lights' intensity: the jitter of a dataset."""
         yaw, pitch = self._yaw + np.radians(yaw), np.radians(pitch)
         direction = np.array([-np.sin(yaw) * np.cos(pitch), np.sin(pitch), np.cos(yaw) * np.cos(pitch)])
-        self._scene.set_pose(self._camera, _look_at(self._centre + self._distance * direction, self._centre))
-        for node, base in zip(self._lights, (KEY_LIGHT, FILL_LIGHT)):
-            node.light.intensity = base * light
-
-    def _upload(self, primitive, data: np.ndarray) -> None:
-        from OpenGL import GL
-
-        GL.glBindBuffer(GL.GL_ARRAY_BUFFER, primitive._buffers[0])
-        GL.glBufferSubData(GL.GL_ARRAY_BUFFER, 0, data.nbytes, data)
+        self._camera = _look_at(self._centre + self._distance * direction, self._centre)
+        self._light_scale = light
 
     def pose(self, head_yaw=0.0, head_pitch=0.0, head_roll=0.0, gaze_yaw=0.0, gaze_pitch=0.0, *look) -> None:
         """Turn the head about the neck and the eyes about their centres (degrees, in the
         order of facesim.animation.spec.POSE), each eye also by its own ``look`` (the
         subject's left eye's yaw and pitch, then the right's: facesim.animation.simulate.look_table)."""
         head = rotation(head_yaw, head_pitch, head_roll)
-        self._scene.set_pose(self._head, _pose(head, self._neck - head @ self._neck))  # about the neck
+        self._head.pose = _pose(head, self._neck - head @ self._neck)  # about the neck
         for node, centre in self._eyes:  # the eyeball is built at the origin, pupil along +z
             own = (0.0, 0.0) if not look else look[0:2] if centre[0] > 0 else look[2:4]
-            self._scene.set_pose(node, _pose(rotation(gaze_yaw + own[0], gaze_pitch + own[1]), centre))
+            node.pose = _pose(rotation(gaze_yaw + own[0], gaze_pitch + own[1]), centre)
 
     def render(self, positions: np.ndarray, arrows: np.ndarray | None = None, pose=None, jaw=0.0) -> np.ndarray:
         """One frame: positions (n, 3) of the face, optional arrows (n, 3) drawn from
@@ -357,18 +379,69 @@ class FaceRenderer:
             uploads.append((self._arrows, np.stack([positions, positions + vectors], axis=1).reshape(-1, 3).astype(np.float32)))
         return angles, uploads
 
-    @_in_own_context
     def _drawn(self, prepared: tuple) -> np.ndarray:
         """A prepared frame (``_prepared``) uploaded and drawn: the colour as drawn, its
-        alpha where the head is for --onto."""
+        alpha where the head is for --onto. Each part as pyrender drew it: the solid parts
+        first, the farthest node first (in the order they were added where nodes tie: the
+        head's parts all hang from one), then the see-through ones; blended or not, culled
+        or double-sided, in polygon lines for a mask's wireframe."""
+        from OpenGL import GL
+
+        self._context.make_current()
         angles, uploads = prepared
         self.pose(*angles)
         for primitive, data in uploads:
-            self._upload(primitive, data)
-        colour, depth = self._renderer.render(self._scene, flags=self._flags)
+            primitive.upload(data)
+        framebuffer = self._framebuffer
+        framebuffer.bind()
+        GL.glEnable(GL.GL_DEPTH_TEST)
+        GL.glDepthMask(GL.GL_TRUE)
+        GL.glDepthFunc(GL.GL_LESS)
+        GL.glDepthRange(0.0, 1.0)
+        GL.glClearColor(*BACKGROUND)
+        GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
+        GL.glEnable(GL.GL_MULTISAMPLE)
+        GL.glEnable(GL.GL_BLEND)
+        GL.glPolygonMode(GL.GL_FRONT_AND_BACK, GL.GL_LINE if self._polygon_lines else GL.GL_FILL)
+        view = np.linalg.inv(self._camera)
+        eye = self._camera[:3, 3]
+        poses = {id(part.node): part.node.world() for part in self._drawn_parts}
+        far = {key: -np.linalg.norm(pose[:3, 3] - eye) for key, pose in poses.items()}
+        order = sorted(self._drawn_parts, key=lambda part: (part.see_through, far[id(part.node)]))
+        for part in order:
+            program = self._program(part)
+            program.use()
+            program.set("V", view)
+            program.set("P", self._projection)
+            program.set("cam_pos", eye)
+            if not self._flat:
+                program.set("ambient_light", (0.28, 0.26, 0.26))
+                program.set("n_directional_lights", len(self._lights))  # pyrender's shader counts them; facesim's does not
+                for k, (colour, intensity, direction) in enumerate(self._lights):
+                    program.set(f"directional_lights[{k}].color", colour)
+                    program.set(f"directional_lights[{k}].intensity", float(intensity * self._light_scale))
+                    program.set(f"directional_lights[{k}].direction", direction)
+            program.set("M", poses[id(part.node)])
+            if part.texture is not None:
+                part.texture.bind(0)
+                program.set("material.base_color_texture", 0)
+            program.set("material.emissive_factor", part.emissive)
+            program.set("material.base_color_factor", part.colour)
+            program.set("material.metallic_factor", float(part.metallic))
+            program.set("material.roughness_factor", float(part.roughness))
+            GL.glBlendFunc(*((GL.GL_SRC_ALPHA, GL.GL_ONE_MINUS_SRC_ALPHA) if part.blended else (GL.GL_ONE, GL.GL_ZERO)))
+            if part.double_sided:
+                GL.glDisable(GL.GL_CULL_FACE)
+            else:
+                GL.glEnable(GL.GL_CULL_FACE)
+                GL.glCullFace(GL.GL_BACK)
+            part.primitive.draw()
+        GL.glBindVertexArray(0)
+        GL.glUseProgram(0)
+        colour = framebuffer.pixels(alpha=self._rgba)
         if self._backdrop is not None:  # --onto: the alpha drawn where the head is, none elsewhere
             colour = np.array(colour)
-            colour[:, :, 3] *= depth > 0
+            colour[:, :, 3] *= framebuffer.covered()
         return colour
 
     def render_figure(self, scene: np.ndarray) -> np.ndarray:
@@ -411,11 +484,7 @@ class FaceRenderer:
     def project(self, points: np.ndarray) -> np.ndarray:
         """(k, 2) pixel coordinates (x right, y down) where points (k, 3) of the head at
         rest pose appear in the frame."""
-        camera = self._camera.camera
-        pose = self._scene.get_pose(self._camera)
-        view = np.linalg.inv(pose)
-        w, h = self._factor * self.settings.width, self._factor * self.settings.height  # the viewport drawn
-        clip = np.c_[points, np.ones(len(points))] @ (camera.get_projection_matrix(w, h) @ view).T
+        clip = np.c_[points, np.ones(len(points))] @ (self._projection @ np.linalg.inv(self._camera)).T
         ndc = clip[:, :2] / clip[:, 3:4]
         return np.column_stack([(ndc[:, 0] + 1) / 2 * self.settings.width, (1 - ndc[:, 1]) / 2 * self.settings.height])
 
@@ -436,19 +505,11 @@ class FaceRenderer:
         return cls(animation.rest, animation.faces, settings, backend, animation.figure, animation.face)
 
     def close(self) -> None:
-        """Free the renderer's GL objects and its context: what pyrender's
-        OffscreenRenderer.delete does, without the full garbage collection it ends with,
-        which took 112-125 ms of each close at the end of a render of the head
-        (2026-12-03). What the context held is gone with it; its Python wrappers are left
-        to the collector's own pace."""
-        offscreen = getattr(self, "_renderer", None)
-        if offscreen is not None:
-            with _collection_paused():
-                offscreen._platform.make_current()
-                offscreen._renderer.delete()
-                offscreen._platform.delete_context()
-                offscreen._renderer = offscreen._platform = None  # its __del__ then finds nothing to delete
-            self._renderer = None
+        """Free the renderer's context and what it held (its buffers, programs and
+        textures go with it)."""
+        if self._context is not None:
+            self._context.delete()
+            self._context = None
 
     def __enter__(self):
         return self

@@ -67,9 +67,9 @@ KEY_DIRECTION, FILL_DIRECTION = np.array([-0.6, 0.7, 1.0]), np.array([0.9, -0.1,
 #: brightest (and ``EDGE_FLOOR`` levels) is blended toward its neighbour across the edge.
 #: ``supersample`` renders each frame this many times wider and taller and averages the
 #: blocks instead (``_downsample``): 4 samples per pixel, twice the frame's cost, faster
-#: than pyrender's multisampling in software (``_single_sample``). Frames larger than
-#: ``SUPERSAMPLE_LIMIT`` are filtered; frames with lines (their one-pixel lines would fade
-#: or smear) use pyrender's multisampling.
+#: than multisampling in software (108 ms a frame of the head at 512² with 2 or 4 samples,
+#: 35 ms with one). Frames larger than ``SUPERSAMPLE_LIMIT`` are filtered; frames with
+#: lines (their one-pixel lines would fade or smear) are drawn with 4 samples a pixel.
 SUPERSAMPLE, SUPERSAMPLE_LIMIT = 2, 4096
 
 
