@@ -24,12 +24,15 @@ SHADERS = Path(__file__).with_name("shaders")
 class Context:
     """An offscreen OpenGL 3.3+ core context on the platform PyOpenGL was imported with
     (facesim.renderer.backend.use_backend): ``egl`` or ``osmesa``. EGL contexts of one
-    process share one display, terminated with the last of them."""
+    process share one display, terminated with the last of them. OSMesa's draws into its
+    own ``width`` x ``height`` buffer (``Framebuffer(own=True)``): drawn into a framebuffer
+    object instead, a few pixels of some frames came out up to 6 levels otherwise than
+    pyrender's (its depth buffer is not the renderbuffer's)."""
 
     _displays: dict = {}
 
-    def __init__(self, platform: str):
-        self.platform = platform
+    def __init__(self, platform: str, width: int, height: int):
+        self.platform, self.width, self.height = platform, width, height
         if platform == "egl":
             self._egl()
         else:
@@ -76,7 +79,7 @@ class Context:
         self._context = osmesa.OSMesaCreateContextAttribs(attributes, None)
         if not self._context:
             raise RenderError("OSMesa could not create an OpenGL 3.3 core context")
-        self._buffer = arrays.GLubyteArray.zeros((1, 1, 4))  # drawn into a framebuffer object, never here
+        self._buffer = arrays.GLubyteArray.zeros((self.height, self.width, 4))
 
     def make_current(self) -> None:
         if self.platform == "egl":
@@ -87,7 +90,7 @@ class Context:
         else:
             from OpenGL import GL, osmesa
 
-            if not osmesa.OSMesaMakeCurrent(self._context, self._buffer, GL.GL_UNSIGNED_BYTE, 1, 1):
+            if not osmesa.OSMesaMakeCurrent(self._context, self._buffer, GL.GL_UNSIGNED_BYTE, self.width, self.height):
                 raise RenderError("OSMesa could not make its context current")
 
     def delete(self) -> None:
@@ -112,14 +115,15 @@ class Context:
 
 class Framebuffer:
     """An RGBA8 colour and 24-bit depth framebuffer, ``samples`` per pixel (0: one), read
-    back through a single-sample copy when multisampled."""
+    back through a single-sample copy when multisampled; or, ``own``, the context's own
+    buffer (OSMesa's: one sample a pixel)."""
 
-    def __init__(self, width: int, height: int, samples: int = 0):
-
-        self.width, self.height, self.samples = width, height, samples
+    def __init__(self, width: int, height: int, samples: int = 0, own: bool = False):
+        self.width, self.height = width, height
+        self.samples = 0 if own else samples
         self._buffers = []
-        self.draw = self._framebuffer(samples)
-        self.read = self._framebuffer(0) if samples else self.draw
+        self.draw = 0 if own else self._framebuffer(self.samples)
+        self.read = self._framebuffer(0) if self.samples else self.draw
 
     def _framebuffer(self, samples: int) -> int:
         from OpenGL import GL

@@ -127,10 +127,10 @@ class FaceRenderer:
         try:
             from . import gl
 
-            self._context = gl.Context(self.backend)
+            width, height = self._factor * settings.width, self._factor * settings.height
+            self._context = gl.Context(self.backend, width, height)
             self._context.make_current()
-            self._framebuffer = gl.Framebuffer(self._factor * settings.width, self._factor * settings.height,
-                                               4 if multisampled else 0)
+            self._framebuffer = gl.Framebuffer(width, height, 4 if multisampled else 0, own=self.backend == "osmesa")
         except RenderError:
             raise
         except Exception as exc:
