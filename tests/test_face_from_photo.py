@@ -10,7 +10,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 import yaml
-from conftest import EXPRESSIONS, spec
+from conftest import EXPRESSIONS, ROOT, spec
 
 from facesim.animation.simulate import model_for, simulate
 from facesim.config import HEAD
@@ -392,6 +392,26 @@ def test_an_implausible_fitted_camera_is_one_line_before_anything_is_drawn(faces
     (line,) = result.stderr.strip().splitlines()
     assert str(face / "face.yaml") in line and "camera" in line and field.split("_")[0] in line, line
     assert not target.exists()
+
+
+def test_onto_draws_the_same_photo_with_either_backend(faces, photos, tmp_path):
+    """--onto reads the frame's alpha back with its colour: with OSMesa, whose frame
+    pyrender read without alpha, it stopped with a traceback (IndexError); now both
+    backends lay the same face over the photo."""
+    drawn = {}
+    for backend in ("egl", "osmesa"):
+        out = tmp_path / f"{backend}.png"
+        result = subprocess.run([sys.executable, "-m", "facesim", "render", "happy", "--face", str(faces["astronaut"]),
+                                 "--onto", str(photos["astronaut"]), "--frame", "30", "--backend", backend, "-o", str(out)],
+                                capture_output=True, text=True, cwd=ROOT, timeout=600)
+        assert result.returncode == 0, result.stderr
+        drawn[backend] = iio.imread(out).astype(int)
+    from facesim.face.photo import read_image
+
+    photo = read_image(photos["astronaut"]).astype(int)
+    box = face_box(photos["astronaut"])
+    assert np.abs(drawn["egl"][box] - photo[box]).mean() > 2  # the face smiles over the photo
+    assert np.abs(drawn["egl"] - drawn["osmesa"]).max() <= 4 and np.abs(drawn["egl"] - drawn["osmesa"]).mean() < 0.05
 
 
 def test_onto_photos_too_small_or_too_large(faces, photos, tmp_path):
