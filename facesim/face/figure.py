@@ -23,15 +23,15 @@ occlusion shells the lid vertices nearest them.
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
-from scipy.sparse import coo_matrix, csr_matrix
 
 from .. import cache
-from ..config import PARALLEL_OPTIONS
+from ..config import PARALLEL_OPTIONS, VERSION
 from ..geometry import axis_rotation, rotation
 from ..physics import mesh
 from ..physics.mesh import FaceMesh, smooth_interpolation, unique_edges
@@ -126,6 +126,22 @@ def _pupil(x: np.ndarray, head: Head, side: str) -> Pupil:
     rows = front & (radius < DILATING) & (radius > 0)
     return Pupil(iris[rows], centre, axis, across[rows] / radius[rows, None], radius[rows],
                  radius[front][order], height[front][order])
+
+
+class Follow(NamedTuple):
+    """A sparse (k, n) matrix in compressed rows (as SciPy's csr_matrix holds one): row r's
+    weights ``data[indptr[r]:indptr[r + 1]]`` on the columns ``indices`` of the same range.
+    Kept as its arrays so that a figure read from facesim's cache imports no SciPy."""
+
+    data: np.ndarray
+    indices: np.ndarray
+    indptr: np.ndarray
+    shape: tuple[int, int]
+
+    def row_sums(self) -> np.ndarray:
+        """(k,) each row's sum, its weights added in their order (as SciPy's product does)."""
+        return np.bincount(np.repeat(np.arange(self.shape[0]), np.diff(self.indptr)), weights=self.data,
+                           minlength=self.shape[0])
 
 
 @dataclass(frozen=True)
@@ -328,7 +344,7 @@ def _face_follow(head: Head) -> np.ndarray:
 _FOLLOW: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
 
-def skin_follow(head: Head) -> tuple[np.ndarray, csr_matrix]:
+def skin_follow(head: Head) -> tuple[np.ndarray, Follow]:
     """Rows (k,) and weights (k, 468), sparse: how the head's skin follows the
     displacements of the landmarks' vertices. The solves run over the mesh's graph
     Laplacian and the rigid and deep vertices are chosen on the generic head, so one set of
@@ -342,12 +358,14 @@ def skin_follow(head: Head) -> tuple[np.ndarray, csr_matrix]:
                     Path(mesh.__file__).read_bytes())
     if key not in _FOLLOW:
         stored = cache.cached_arrays("skin-follow", key, lambda: _skin_follow(head))
-        _FOLLOW[key] = (stored["rows"], csr_matrix((stored["data"], stored["indices"], stored["indptr"]),
-                                                   shape=tuple(stored["shape"])))
+        _FOLLOW[key] = (stored["rows"], Follow(stored["data"], stored["indices"], stored["indptr"],
+                                               tuple(int(n) for n in stored["shape"])))
     return _FOLLOW[key]
 
 
 def _skin_follow(head: Head) -> dict[str, np.ndarray]:
+    from scipy.sparse import csr_matrix
+
     x = head.neutral
     n_face = head.face_count
     face_follow = _face_follow(head)
@@ -418,7 +436,7 @@ def head_figure(head: Head, model) -> Figure:
     socket_part = np.isin(lower_rows, mouth)
     shallow = socket_part & ~np.isin(lower_rows, deep_mouth)
     followed = np.zeros(len(x))
-    followed[follow_rows] = np.asarray(follow.sum(axis=1)).ravel()
+    followed[follow_rows] = follow.row_sums()
     weight[shallow] *= np.clip(1.0 - followed[lower_rows[shallow]], 0.0, 1.0)
     tongue = tongue_rig(x, _tongue_rows(head))  # on the floor of the mouth: all of it that its rig moves turns with the mandible
     in_tongue = np.isin(lower_rows, tongue.rows)
@@ -518,6 +536,7 @@ def _over_iris(x: np.ndarray, head: Head, side: str, triangles: np.ndarray) -> n
 
 
 def _components(triangles: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
+    from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     n = rows.max() + 1
@@ -538,11 +557,74 @@ def figure_for(model):
     if not isinstance(model.mesh, HeadMesh):
         return None
     if id(model) not in _figures:
-        _figures[id(model)] = (model, head_figure(model.mesh.head, model))  # the model kept alive with its key
+        _figures[id(model)] = (model, _stored_figure(model))  # the model kept alive with its key
         while len(_figures) > FIGURE_CACHE:
             _figures.popitem(last=False)
     _figures.move_to_end(id(model))
     return _figures[id(model)][1]
+
+
+#: The code a figure is built by: a stored figure (``_stored_figure``) is keyed by it.
+FIGURE_CODE = tuple(sorted(Path(__file__).parent.glob("*.py"))) + tuple(
+    Path(__file__).parent.parent / "physics" / name for name in ("mesh.py", "rig.py", "muscles.py", "model.py"))
+
+
+def _stored_figure(model) -> Figure:
+    """``head_figure`` of a model's head, kept in facesim's cache (a warm render reads it
+    in milliseconds, where building it took 0.15 s and SciPy's spatial and graph modules),
+    keyed by everything it is built from: the head's arrays and parts, the simulation
+    mesh at rest, the eyelids' landmarks, the jaw's hinge and axis, and the code."""
+    head = model.mesh.head
+    arrays = [np.ascontiguousarray(getattr(head, f.name)).tobytes() for f in fields(head)
+              if isinstance(getattr(head, f.name), np.ndarray)]
+    lids = [np.ascontiguousarray(np.r_[lid.upper, lid.lower]).tobytes() for lid in model.muscles.eyelids]
+    key = cache.key(*arrays, repr((head.materials, sorted(head.parts.items()))).encode(), *lids,
+                    np.ascontiguousarray(model.rest_position).tobytes(), np.asarray(model.rig.jaw_hinge).tobytes(),
+                    np.asarray(model.rig.jaw_axis).tobytes(), VERSION.encode(), *(path.read_bytes() for path in FIGURE_CODE))
+    return _figure_from(cache.cached_arrays("figure", key, lambda: _figure_arrays(head_figure(head, model)), keep=4))
+
+
+def _figure_arrays(figure: Figure) -> dict[str, np.ndarray]:
+    """A figure as named arrays (facesim.cache keeps no Python objects)."""
+    out = {name: np.asarray(getattr(figure, name)) for name in
+           ("rest", "colour", "sim_rest", "anchor", "follow_rows", "follow_gain", "jaw_rows", "jaw_weight", "jaw_hinge",
+            "jaw_axis", "neck")}
+    out.update(follow_data=figure.follow.data, follow_indices=figure.follow.indices, follow_indptr=figure.follow.indptr,
+               follow_shape=np.asarray(figure.follow.shape), part_names=np.array([p.name for p in figure.parts]),
+               part_roughness=np.array([p.roughness for p in figure.parts], dtype=np.float64),
+               counts=np.array([len(figure.eyes), len(figure.guards), len(figure.pupils), figure.tongue is not None]))
+    for k, part in enumerate(figure.parts):
+        out[f"part{k}_triangles"] = part.triangles
+        if part.uv is not None:
+            out[f"part{k}_uv"] = part.uv
+    for k, (rows, centre) in enumerate(figure.eyes):
+        out[f"eye{k}_rows"], out[f"eye{k}_centre"] = rows, np.asarray(centre)
+    for k, (rows, centre, radius) in enumerate(figure.guards):
+        out[f"guard{k}_rows"], out[f"guard{k}_centre"], out[f"guard{k}_radius"] = rows, np.asarray(centre), radius
+    for k, pupil in enumerate(figure.pupils):
+        out.update({f"pupil{k}_{f.name}": np.asarray(getattr(pupil, f.name)) for f in fields(Pupil)})
+    if figure.tongue is not None:
+        out.update({f"tongue_{f.name}": np.asarray(getattr(figure.tongue, f.name)) for f in fields(Tongue)})
+    return out
+
+
+def _figure_from(arrays: dict[str, np.ndarray]) -> Figure:
+    """The figure ``_figure_arrays`` wrote."""
+    eyes, guards, pupils, tongue = (int(n) for n in arrays["counts"])
+    parts = tuple(Part(str(name), arrays[f"part{k}_triangles"], float(roughness), arrays.get(f"part{k}_uv"))
+                  for k, (name, roughness) in enumerate(zip(arrays["part_names"], arrays["part_roughness"])))
+    return Figure(
+        rest=arrays["rest"], colour=arrays["colour"], parts=parts, sim_rest=arrays["sim_rest"], anchor=arrays["anchor"],
+        follow_rows=arrays["follow_rows"], follow=Follow(arrays["follow_data"], arrays["follow_indices"], arrays["follow_indptr"],
+                                                         tuple(int(n) for n in arrays["follow_shape"])),
+        follow_gain=arrays["follow_gain"], jaw_rows=arrays["jaw_rows"], jaw_weight=arrays["jaw_weight"],
+        jaw_hinge=arrays["jaw_hinge"], jaw_axis=arrays["jaw_axis"],
+        eyes=tuple((arrays[f"eye{k}_rows"], arrays[f"eye{k}_centre"]) for k in range(eyes)),
+        guards=tuple((arrays[f"guard{k}_rows"], arrays[f"guard{k}_centre"], arrays[f"guard{k}_radius"]) for k in range(guards)),
+        neck=arrays["neck"],
+        pupils=tuple(Pupil(**{f.name: arrays[f"pupil{k}_{f.name}"] for f in fields(Pupil)}) for k in range(pupils)),
+        tongue=Tongue(**{f.name: arrays[f"tongue_{f.name}"] for f in fields(Tongue)}) if tongue else None,
+    )
 
 
 #: The baked photo's texture atlas (facesim.face.bake): each ICT material that takes the
