@@ -581,16 +581,17 @@ def _stored_figure(model) -> Figure:
     key = cache.key(*arrays, repr((head.materials, sorted(head.parts.items()))).encode(), *lids,
                     np.ascontiguousarray(model.rest_position).tobytes(), np.asarray(model.rig.jaw_hinge).tobytes(),
                     np.asarray(model.rig.jaw_axis).tobytes(), VERSION.encode(), *(path.read_bytes() for path in FIGURE_CODE))
-    return _figure_from(cache.cached_arrays("figure", key, lambda: _figure_arrays(head_figure(head, model)), keep=4))
+    return _figure_from(cache.cached_arrays("figure", key, lambda: _figure_arrays(head_figure(head, model)), keep=4), head)
 
 
 def _figure_arrays(figure: Figure) -> dict[str, np.ndarray]:
-    """A figure as named arrays (facesim.cache keeps no Python objects)."""
+    """A figure as named arrays (facesim.cache keeps no Python objects), but for what its
+    head gives again at no cost: its vertices at rest, and the skin's follow weights,
+    shared by every identity and kept in the cache once (``skin_follow``: 7.5 of the
+    entry's 11.8 MB, written again for every identity of a dataset)."""
     out = {name: np.asarray(getattr(figure, name)) for name in
-           ("rest", "colour", "sim_rest", "anchor", "follow_rows", "follow_gain", "jaw_rows", "jaw_weight", "jaw_hinge",
-            "jaw_axis", "neck")}
-    out.update(follow_data=figure.follow.data, follow_indices=figure.follow.indices, follow_indptr=figure.follow.indptr,
-               follow_shape=np.asarray(figure.follow.shape), part_names=np.array([p.name for p in figure.parts]),
+           ("colour", "sim_rest", "anchor", "follow_gain", "jaw_rows", "jaw_weight", "jaw_hinge", "jaw_axis", "neck")}
+    out.update(part_names=np.array([p.name for p in figure.parts]),
                part_roughness=np.array([p.roughness for p in figure.parts], dtype=np.float64),
                counts=np.array([len(figure.eyes), len(figure.guards), len(figure.pupils), figure.tongue is not None]))
     for k, part in enumerate(figure.parts):
@@ -608,16 +609,15 @@ def _figure_arrays(figure: Figure) -> dict[str, np.ndarray]:
     return out
 
 
-def _figure_from(arrays: dict[str, np.ndarray]) -> Figure:
-    """The figure ``_figure_arrays`` wrote."""
+def _figure_from(arrays: dict[str, np.ndarray], head: Head) -> Figure:
+    """The figure of ``head`` that ``_figure_arrays`` wrote."""
     eyes, guards, pupils, tongue = (int(n) for n in arrays["counts"])
+    follow_rows, follow = skin_follow(head)
     parts = tuple(Part(str(name), arrays[f"part{k}_triangles"], float(roughness), arrays.get(f"part{k}_uv"))
                   for k, (name, roughness) in enumerate(zip(arrays["part_names"], arrays["part_roughness"])))
     return Figure(
-        rest=arrays["rest"], colour=arrays["colour"], parts=parts, sim_rest=arrays["sim_rest"], anchor=arrays["anchor"],
-        follow_rows=arrays["follow_rows"], follow=Follow(arrays["follow_data"], arrays["follow_indices"], arrays["follow_indptr"],
-                                                         tuple(int(n) for n in arrays["follow_shape"])),
-        follow_gain=arrays["follow_gain"], jaw_rows=arrays["jaw_rows"], jaw_weight=arrays["jaw_weight"],
+        rest=head.vertices, colour=arrays["colour"], parts=parts, sim_rest=arrays["sim_rest"], anchor=arrays["anchor"],
+        follow_rows=follow_rows, follow=follow, follow_gain=arrays["follow_gain"], jaw_rows=arrays["jaw_rows"], jaw_weight=arrays["jaw_weight"],
         jaw_hinge=arrays["jaw_hinge"], jaw_axis=arrays["jaw_axis"],
         eyes=tuple((arrays[f"eye{k}_rows"], arrays[f"eye{k}_centre"]) for k in range(eyes)),
         guards=tuple((arrays[f"guard{k}_rows"], arrays[f"guard{k}_centre"], arrays[f"guard{k}_radius"]) for k in range(guards)),
