@@ -138,6 +138,13 @@ class Follow(NamedTuple):
     indptr: np.ndarray
     shape: tuple[int, int]
 
+    def __matmul__(self, x: np.ndarray) -> np.ndarray:
+        """(k, ...) the weights times ``x`` (n, ...): SciPy's product (the calibration's,
+        facesim.animation.calibration, not a render's)."""
+        from scipy.sparse import csr_matrix
+
+        return csr_matrix((self.data, self.indices, self.indptr), shape=self.shape) @ x
+
     def row_sums(self) -> np.ndarray:
         """(k,) each row's sum, its weights added in their order (as SciPy's product does)."""
         return np.bincount(np.repeat(np.arange(self.shape[0]), np.diff(self.indptr)), weights=self.data,
