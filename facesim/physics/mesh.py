@@ -146,7 +146,7 @@ class FaceMesh:
 
     def connected_components(self) -> int:
         """How many separate pieces the mesh is: each vertex takes the smallest label among
-        its neighbours' until none changes (as many rounds as the mesh is wide: 25 on the
+        its neighbours' until none changes (as many rounds as the mesh is wide: 15 on the
         head's skin). Every mesh is checked when it loads, and SciPy's graph module took
         0.05-0.07 s of a warm render to import for it."""
         e = self.edges

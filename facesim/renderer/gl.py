@@ -19,6 +19,8 @@ from ..errors import RenderError
 
 #: facesim's shaders: pyrender's vertex and unlit fragment shaders, facesim's lit one.
 SHADERS = Path(__file__).with_name("shaders")
+#: The per-instance model matrix of every draw (one instance, not moved).
+_IDENTITY = np.eye(4)
 
 
 class Context:
@@ -121,7 +123,6 @@ class Framebuffer:
     def __init__(self, width: int, height: int, samples: int = 0, own: bool = False):
         self.width, self.height = width, height
         self.samples = 0 if own else samples
-        self._buffers = []
         self.draw = 0 if own else self._framebuffer(self.samples)
         self.read = self._framebuffer(0) if self.samples else self.draw
 
@@ -138,7 +139,6 @@ class Framebuffer:
         GL.glFramebufferRenderbuffer(GL.GL_FRAMEBUFFER, GL.GL_DEPTH_ATTACHMENT, GL.GL_RENDERBUFFER, depth)
         if GL.glCheckFramebufferStatus(GL.GL_FRAMEBUFFER) != GL.GL_FRAMEBUFFER_COMPLETE:
             raise RenderError(f"could not make a {self.width}x{self.height} framebuffer")
-        self._buffers.append((framebuffer, colour, depth))
         return framebuffer
 
     def bind(self) -> None:
@@ -265,7 +265,7 @@ class Primitive:
 
         GL.glBindVertexArray(self.vao)
         for k in range(4):  # a vertex array's constant attributes are the context's: set per draw
-            GL.glVertexAttrib4f(self.instance + k, *np.eye(4)[k])
+            GL.glVertexAttrib4f(self.instance + k, *_IDENTITY[k])
         if self.ibo is None:
             GL.glDrawArrays(self.mode, 0, self.count)
         else:

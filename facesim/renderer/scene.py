@@ -124,10 +124,10 @@ class FaceRenderer:
         self._flat = settings.look == "photo"
         self._rgba = settings.onto is not None
         self._polygon_lines = settings.wireframe and figure is None
+        width, height = self._factor * settings.width, self._factor * settings.height
         try:
             from . import gl
 
-            width, height = self._factor * settings.width, self._factor * settings.height
             self._context = gl.Context(self.backend, width, height)
             self._context.make_current()
             self._framebuffer = gl.Framebuffer(width, height, 4 if multisampled else 0, own=self.backend == "osmesa")
@@ -177,7 +177,6 @@ class FaceRenderer:
         self._centre, self._distance, self._yaw = centre, distance, yaw
         self._toward_camera = WIRE_LIFT * (eye - centre) / np.linalg.norm(eye - centre)
         self._backdrop = None
-        width, height = self._factor * settings.width, self._factor * settings.height
         if settings.onto is None:
             self._projection = _perspective(fov, settings.width / settings.height, 1.0, 10 * distance)
             self._camera = _look_at(eye, centre)
