@@ -30,6 +30,15 @@ CHUNKS = 2
 #: saves: a 100 µs step of the 468-vertex faces starts 10 to 25 (one per parallel loop,
 #: one per active muscle).
 PARALLEL_FROM = 4000
+#: How long libgomp's threads spin for work after a parallel loop before they sleep
+#: (``GOMP_SPINCOUNT``, read when Numba first loads OpenMP), unless the user set it or
+#: ``OMP_WAIT_POLICY``. libgomp's default, 300,000 spins, kept a core busy between a
+#: render's parallel loops (the head's skin weights, the edge filter), a core that
+#: llvmpipe's threads and the simulation wanted: the warm `facesim render
+#: expressions/happy.yaml`, 6 alternated runs each, 2.22 -> 2.08 s median wall and 2.92 ->
+#: 2.50 s of CPU. Sleeping at once (``OMP_WAIT_POLICY=passive``) slowed the 27,614-vertex
+#: face's parallel step (2 threads: 0.75 -> 0.87-0.95 s), this count did not (0.60 s).
+OPENMP_SPIN = 10_000
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 PROJECT_DIR = PACKAGE_DIR.parent
@@ -188,11 +197,14 @@ def _prefer_openmp() -> None:
     (``NUMBA_THREADING_LAYER`` or ``_PRIORITY``). Numba tries TBB first, and where the
     ``tbb`` package is installed its pool writes "Unable to join threads to shut down
     before fork()" on stdout each time a process forks, which every MP4 (ffmpeg started
-    by imageio-ffmpeg) does. OpenMP, which Debian's libgomp provides, writes nothing."""
+    by imageio-ffmpeg) does. OpenMP, which Debian's libgomp provides, writes nothing.
+    And its threads spin ``OPENMP_SPIN`` times between loops, unless the user chose."""
     import numba
 
     if not ({"NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY"} & set(os.environ)):
         numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
+    if not ({"OMP_WAIT_POLICY", "GOMP_SPINCOUNT"} & set(os.environ)):
+        os.environ["GOMP_SPINCOUNT"] = str(OPENMP_SPIN)
 
 
 _numba_ready = threading.Lock()

@@ -769,6 +769,29 @@ def test_a_pools_worker_starts_openmps_threads_too(tbb_env):
     assert layer(NUMBA_THREADING_LAYER_PRIORITY="tbb omp workqueue") == "tbb"
 
 
+def test_openmps_threads_sleep_soon_after_a_loop_unless_the_user_chose_otherwise():
+    """libgomp's threads spin 300,000 times for work after each parallel loop unless told
+    otherwise, and a render's loops (the head's skin weights, the edge filter) left them
+    taking a core from llvmpipe and the simulation: facesim sets a short spin
+    (facesim.config.OPENMP_SPIN) before OpenMP starts, in the process and its workers,
+    and keeps what a user set for OpenMP's waiting."""
+    code = ("from facesim.workers import share_the_cores; share_the_cores(2); import os, numba; "
+            "print(numba.threading_layer(), os.environ.get('GOMP_SPINCOUNT'), os.environ.get('OMP_WAIT_POLICY'))")
+
+    def started(**changes):
+        env = {k: v for k, v in os.environ.items() if k not in ("GOMP_SPINCOUNT", "OMP_WAIT_POLICY")}
+        result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=dict(env, **changes),
+                                timeout=120)
+        assert result.returncode == 0, result.stderr[-2000:]
+        return result.stdout.split()[-3:]
+
+    from facesim.config import OPENMP_SPIN
+
+    assert started() == ["omp", str(OPENMP_SPIN), "None"]
+    assert started(GOMP_SPINCOUNT="infinity") == ["omp", "infinity", "None"]
+    assert started(OMP_WAIT_POLICY="active") == ["omp", "None", "active"]
+
+
 def test_a_long_clip_is_announced_from_its_measured_speed(monkeypatch):
     """`frames: 100000` on the head: the estimate assumed a rate the head does not reach
     (23 s predicted, 156 s taken). Now a long clip's first frames are timed on the face at
