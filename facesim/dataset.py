@@ -235,7 +235,15 @@ def dask_client(scheduler: str | None, jobs: int, timeout: float | None = None):
     logging.getLogger("distributed").setLevel(logging.ERROR)
     if scheduler:
         return _connect(Client, scheduler, SCHEDULER_TIMEOUT if timeout is None else timeout)
-    cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None)
+    # the cluster's nannies set their workers' variables (OMP_NUM_THREADS=1,
+    # MALLOC_TRIM_THRESHOLD_, PYTHONHASHSEED, ...) in this process's environment, and left
+    # them for every process the caller starts later: put back once the workers are up
+    environment = dict(os.environ)
+    try:
+        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None)
+    finally:
+        os.environ.clear()
+        os.environ.update(environment)
     client = Client(cluster)
     client._facesim_cluster = cluster
     return client

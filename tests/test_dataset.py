@@ -1,6 +1,7 @@
 """Datasets: the same samples on any executor, resumable after a crash, clear errors."""
 
 import hashlib
+import os
 import signal
 import subprocess
 import sys
@@ -11,6 +12,7 @@ pytest.importorskip("dask.distributed")
 
 import numpy as np  # noqa: E402
 from conftest import wait_for  # noqa: E402
+from forked import facesim_process  # noqa: E402
 
 from facesim.dataset import POSE_JITTER, DatasetSettings, build_dataset, read_manifest, sample  # noqa: E402
 from facesim.errors import InputError  # noqa: E402
@@ -67,8 +69,14 @@ def test_every_renderer_of_a_head_draws_the_same_pixels():
 
 
 def test_dask_local_cluster_gives_the_same_manifest_as_the_local_executor(tmp_path):
+    """The same images by either executor; and Dask's LocalCluster, which sets the
+    variables its workers start with (OMP_NUM_THREADS=1, MALLOC_TRIM_THRESHOLD_,
+    PYTHONHASHSEED, ...) in the process that makes it, leaves the caller's environment as
+    it was: every process the caller starts later would have run on one OpenMP thread."""
     local = build_dataset(tmp_path / "local", 6, SETTINGS, executor="local", jobs=1)
+    before = dict(os.environ)
     dask = build_dataset(tmp_path / "dask", 6, SETTINGS, executor="dask", jobs=2)
+    assert dict(os.environ) == before
     a, b = check_complete(local.parent, 6), check_complete(dask.parent, 6)
     assert [(r["id"], r["sha256"]) for r in a] == [(r["id"], r["sha256"]) for r in b]
     assert len({r["sha256"] for r in a}) == 6  # six different images
@@ -126,8 +134,7 @@ def test_clips_hold_every_frame_and_end_on_the_image(tmp_path):
 ])
 def test_bad_arguments_are_one_line(tmp_path, args, code, message):
     """Bad arguments exit 2; a scheduler that cannot be reached is a failed run (exit 1)."""
-    result = subprocess.run([sys.executable, "-m", "facesim", "dataset", "-o", str(tmp_path / "ds"), *args],
-                            capture_output=True, text=True, timeout=120)
+    result = facesim_process(["dataset", "-o", str(tmp_path / "ds"), *args], timeout=120)
     assert result.returncode == code
     assert result.stderr.strip().splitlines() == [f"facesim: error: {result.stderr.strip().split('error: ', 1)[1]}"]
     assert message in result.stderr and not (tmp_path / "ds").exists()
