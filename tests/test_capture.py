@@ -3,12 +3,11 @@ pose and the gaze (facesim.capture), checked by round trips: known curves render
 facesim, captured, and compared with the curves that made them."""
 
 import re
-import subprocess
-import sys
 
 import imageio.v3 as iio
 import numpy as np
 import pytest
+from forked import facesim_process
 
 import facesim
 from facesim.animation.spec import Spec, load_spec, pose_table
@@ -241,7 +240,7 @@ def test_a_photos_face_animated_is_captured_back(photo_clips, clip):
 
 
 def facesim_command(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "facesim", *args], cwd=cwd, capture_output=True, text=True)
+    return facesim_process(list(args), cwd=cwd)
 
 
 def test_bad_videos_are_one_line_and_nothing_written(tmp_path):

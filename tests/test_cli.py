@@ -1,6 +1,7 @@
 """The command line, as a user meets it: every command and option, every bad input, and
 the batch of the eight thesis expressions. Commands run in fresh processes, as users run
-them (a process keeps the first OpenGL platform it loads)."""
+them (a process keeps the first OpenGL platform it loads), forked from one that has
+imported facesim and nothing of OpenGL (tests/forked.py)."""
 
 import signal
 import subprocess
@@ -11,6 +12,7 @@ import numpy as np
 import pytest
 import yaml
 from conftest import EXPRESSIONS, THESIS_EXPRESSIONS, cpu_seconds, wait_for
+from forked import facesim_process
 
 import facesim as facesim_api
 
@@ -18,8 +20,8 @@ SMALL = ["--size", "160x160"]
 
 
 def facesim(*args, cwd=None, check=None, env=None):
-    result = subprocess.run([sys.executable, "-m", "facesim", *map(str, args)], capture_output=True, text=True,
-                            cwd=cwd, env=env, timeout=600)
+    """`python -m facesim *args` in a process of its own (forked: tests/forked.py)."""
+    result = facesim_process(list(map(str, args)), cwd=cwd, env=env, timeout=600)
     if check is not None:
         assert result.returncode == check, result.stderr
     return result

@@ -3,14 +3,13 @@ photo baked into the head's texture, the face directory (facesim.face.fit, faces
 facesim.face.own_face)."""
 
 import importlib.util
-import subprocess
-import sys
 
 import imageio.v3 as iio
 import numpy as np
 import pytest
 import yaml
 from conftest import EXPRESSIONS, ROOT, spec
+from forked import facesim_process
 
 from facesim.animation.simulate import model_for, simulate
 from facesim.config import HEAD
@@ -386,8 +385,8 @@ def test_an_implausible_fitted_camera_is_one_line_before_anything_is_drawn(faces
     record["camera"][field] = value
     (face / "face.yaml").write_text(yaml.safe_dump(record))
     target = tmp_path / "a.gif"
-    result = subprocess.run([sys.executable, "-m", "facesim", "render", "happy", "--face", str(face), "--onto",
-                             str(photos["astronaut"]), "-o", str(target)], capture_output=True, text=True, timeout=300)
+    result = facesim_process(["render", "happy", "--face", str(face), "--onto", str(photos["astronaut"]), "-o",
+                              str(target)], timeout=300)
     assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
     (line,) = result.stderr.strip().splitlines()
     assert str(face / "face.yaml") in line and "camera" in line and field.split("_")[0] in line, line
@@ -401,9 +400,9 @@ def test_onto_draws_the_same_photo_with_either_backend(faces, photos, tmp_path):
     drawn = {}
     for backend in ("egl", "osmesa"):
         out = tmp_path / f"{backend}.png"
-        result = subprocess.run([sys.executable, "-m", "facesim", "render", "happy", "--face", str(faces["astronaut"]),
-                                 "--onto", str(photos["astronaut"]), "--frame", "30", "--backend", backend, "-o", str(out)],
-                                capture_output=True, text=True, cwd=ROOT, timeout=600)
+        result = facesim_process(["render", "happy", "--face", str(faces["astronaut"]), "--onto",
+                                  str(photos["astronaut"]), "--frame", "30", "--backend", backend, "-o", str(out)],
+                                 cwd=ROOT, timeout=600)
         assert result.returncode == 0, result.stderr
         drawn[backend] = iio.imread(out).astype(int)
     from facesim.face.photo import read_image
@@ -431,8 +430,8 @@ def test_onto_photos_too_small_or_too_large(faces, photos, tmp_path):
     spec.write_text("frames: 2\naus: {AU12: 1.0}\n")
 
     def render(photo, target):
-        return subprocess.run([sys.executable, "-m", "facesim", "render", str(spec), "--face", str(face), "--onto",
-                               str(photo), "-o", str(target)], capture_output=True, text=True, timeout=600)
+        return facesim_process(["render", str(spec), "--face", str(face), "--onto", str(photo), "-o", str(target)],
+                               timeout=600)
 
     refused = render(tiny, tmp_path / "tiny_out")
     assert refused.returncode == 2 and str(tiny) in refused.stderr and "--size" not in refused.stderr
@@ -507,8 +506,8 @@ def test_a_face_directorys_implausible_muscles_or_identity_are_one_line(faces, t
         data["identity"] = [5.0] * 100
     (face / name).write_text(yaml.safe_dump(data))
     target = tmp_path / "a.mp4"
-    result = subprocess.run([sys.executable, "-m", "facesim", "render", "happy", "--face", str(face), "-o", str(target),
-                             "--size", "64x64"], capture_output=True, text=True, timeout=300)
+    result = facesim_process(["render", "happy", "--face", str(face), "-o", str(target), "--size", "64x64"],
+                             timeout=300)
     assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
     (line,) = result.stderr.strip().splitlines()
     assert str(face / name) in line and message in line, line

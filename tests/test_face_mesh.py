@@ -4,6 +4,7 @@ import importlib.util
 
 import numpy as np
 import pytest
+from forked import facesim_process
 
 from facesim.config import HOPPER_MESH, HOPPER_MUSCLES
 from facesim.errors import InputError
@@ -126,25 +127,18 @@ def test_a_second_photo_gives_a_valid_mesh_that_carries_the_default_muscles(tmp_
 
 @needs_mediapipe
 def test_cli_from_photo_on_a_blank_image_is_one_line(tmp_path):
-    import subprocess
-    import sys
-
     import imageio.v3 as iio
 
     blank = tmp_path / "blank.png"
     iio.imwrite(blank, np.zeros((128, 128, 3), dtype=np.uint8))
-    result = subprocess.run([sys.executable, "-m", "facesim", "mesh", "from-photo", str(blank), "-o", str(tmp_path / "m.obj")],
-                            capture_output=True, text=True)
+    result = facesim_process(["mesh", "from-photo", str(blank), "-o", str(tmp_path / "m.obj")])
     assert result.returncode == 2
     assert result.stderr.strip().endswith("blank.png: no face found in the image")
     assert "Traceback" not in result.stderr and not (tmp_path / "m.obj").exists()
 
 
 def run_mesh_info(path):
-    import subprocess
-    import sys
-
-    return subprocess.run([sys.executable, "-m", "facesim", "mesh", "info", str(path)], capture_output=True, text=True)
+    return facesim_process(["mesh", "info", str(path)])
 
 
 def test_mesh_info_on_the_default_face():

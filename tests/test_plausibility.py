@@ -6,12 +6,11 @@ face that does not move, never a traceback. A few cases go through the command l
 where nothing may be left on disk."""
 
 import random
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 import yaml
+from forked import facesim_process
 
 from facesim.animation.simulate import STILL, simulate
 from facesim.animation.spec import load_spec
@@ -114,8 +113,7 @@ def test_through_the_command_line_one_line_and_nothing_written(tmp_path, path, v
     spec = tmp_path / "spec.yaml"
     spec.write_text(yaml.safe_dump(document))
     out = tmp_path / "out.npz"
-    result = subprocess.run([sys.executable, "-m", "facesim", "render", str(spec), "-o", str(out)], capture_output=True,
-                            text=True, timeout=300)
+    result = facesim_process(["render", str(spec), "-o", str(out)], timeout=300)
     assert "Traceback" not in result.stderr
     if result.returncode == 0:
         with np.load(out) as data:

@@ -2,11 +2,9 @@
 ``arkit:``, ``facesim shapes``, the jaw gliding forward and sideways as a rigid body, and
 the lips sealed over an open jaw (ARKit's mouthClose)."""
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
+from forked import facesim_process
 
 import facesim
 from facesim.animation.arkit import ARKIT_52, ICT_ALIASES, shape_facs
@@ -58,7 +56,7 @@ def test_arkit_timeline_tracks(model):
 def test_a_bad_shape_is_one_line_naming_the_field(tmp_path, arkit, message):
     path = tmp_path / "bad.yaml"
     path.write_text(f"frames: 5\narkit: {arkit}\n")
-    result = subprocess.run([sys.executable, "-m", "facesim", "validate", str(path)], capture_output=True, text=True)
+    result = facesim_process(["validate", str(path)])
     assert result.returncode != 0 and "Traceback" not in result.stderr
     line = result.stderr.strip().splitlines()[-1]
     assert str(path) in line and "arkit" in line
@@ -66,7 +64,7 @@ def test_a_bad_shape_is_one_line_naming_the_field(tmp_path, arkit, message):
 
 
 def test_facesim_shapes_lists_every_name_with_what_drives_it():
-    result = subprocess.run([sys.executable, "-m", "facesim", "shapes"], capture_output=True, text=True)
+    result = facesim_process(["shapes"])
     assert result.returncode == 0, result.stderr
     out = result.stdout
     for name in ARKIT_52:
@@ -86,8 +84,7 @@ def test_a_pupil_dilates_on_its_own_side_and_the_npz_shows_it(tmp_path):
     from facesim.face.head import load_head
     path = tmp_path / "pupil.yaml"
     path.write_text("frames: 8\nonset: 2\narkit: {PupilDilate_R: 0.6}\n")
-    result = subprocess.run([sys.executable, "-m", "facesim", "render", str(path), "-o", str(tmp_path / "p.npz")],
-                            capture_output=True, text=True)
+    result = facesim_process(["render", str(path), "-o", str(tmp_path / "p.npz")])
     assert result.returncode == 0, result.stderr
     head = load_head(HEAD)
     with np.load(tmp_path / "p.npz") as data:

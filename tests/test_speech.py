@@ -8,10 +8,10 @@ the lips' inner margins are where the upper lip's and the lower lip's midline me
 not turn with the mandible."""
 
 import subprocess
-import sys
 
 import numpy as np
 import pytest
+from forked import facesim_process
 
 import facesim
 from facesim.animation.calibration import teeth_pieces
@@ -142,8 +142,7 @@ def test_say_writes_an_mp4_with_its_sound_in_time(tmp_path):
     from facesim.export.output import streams
 
     out = tmp_path / "bob.mp4"
-    result = subprocess.run([sys.executable, "-m", "facesim", "say", SENTENCES[0], "-o", str(out), "--size", "64x64"],
-                            capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    result = facesim_process(["say", SENTENCES[0], "-o", str(out), "--size", "64x64"], cwd=tmp_path, timeout=300)
     assert result.returncode == 0, result.stderr[-2000:]
     found = streams(out)
     assert set(found) == {"video", "audio"}
@@ -167,8 +166,7 @@ def test_say_writes_an_mp4_with_its_sound_in_time(tmp_path):
 ])
 def test_bad_speech_is_one_line_and_writes_nothing(tmp_path, args, fragment):
     out = tmp_path / "x.mp4"
-    result = subprocess.run([sys.executable, "-m", "facesim", *args, "-o", str(out)], capture_output=True, text=True,
-                            cwd=tmp_path, timeout=120)
+    result = facesim_process([*args, "-o", str(out)], cwd=tmp_path, timeout=120)
     assert result.returncode == 2 and fragment in result.stderr, result.stderr
     assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
     assert list(tmp_path.iterdir()) == []
@@ -177,12 +175,11 @@ def test_bad_speech_is_one_line_and_writes_nothing(tmp_path, args, fragment):
 def test_a_speaking_spec_plays_in_real_time(tmp_path):
     spec = tmp_path / "talk.yaml"
     spec.write_text('speech: {text: "Hello there"}\ndt: 0.01\n')
-    result = subprocess.run([sys.executable, "-m", "facesim", "render", str(spec), "-o", str(tmp_path / "x.mp4")],
-                            capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    result = facesim_process(["render", str(spec), "-o", str(tmp_path / "x.mp4")], cwd=tmp_path, timeout=120)
     assert result.returncode == 2 and "a spec with speech plays in real time" in result.stderr
     spec.write_text('speech: {text: "Hello there"}\n')
-    result = subprocess.run([sys.executable, "-m", "facesim", "render", str(spec), "-o", str(tmp_path / "x.mp4"), "--fps",
-                             "30"], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    result = facesim_process(["render", str(spec), "-o", str(tmp_path / "x.mp4"), "--fps", "30"], cwd=tmp_path,
+                             timeout=120)
     assert result.returncode == 2 and "speaks, in real time at its own 25 fps" in result.stderr, result.stderr
     assert not (tmp_path / "x.mp4").exists()
     spec.write_text('speech: {text: "Hello there"}\nfps: 30\n')
@@ -273,8 +270,8 @@ def test_speak_puts_the_recordings_own_sound_in_the_mp4_and_closes_the_lips_at_i
     said_by = synthesize(SENTENCES[0])
     recording = wav(tmp_path / "bob.wav", said_by.samples, said_by.rate)
     out = tmp_path / "bob.mp4"
-    result = subprocess.run([sys.executable, "-m", "facesim", "speak", str(recording), "--text", SENTENCES[0], "-o",
-                             str(out), "--size", "64x64"], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    result = facesim_process(["speak", str(recording), "--text", SENTENCES[0], "-o", str(out), "--size", "64x64"],
+                             cwd=tmp_path, timeout=300)
     assert result.returncode == 0, result.stderr[-2000:]
     found = streams(out)
     assert abs(found["audio"] - found["video"]) <= 1 / 25 and found["video"] > said_by.duration
@@ -311,8 +308,7 @@ def test_bad_recordings_are_one_line_and_write_nothing(tmp_path):
     ]
     before = sorted(tmp_path.iterdir())
     for args, fragment in cases:
-        result = subprocess.run([sys.executable, "-m", "facesim", "speak", *map(str, args), "-o", str(tmp_path / "x.mp4")],
-                                capture_output=True, text=True, cwd=tmp_path, timeout=300)
+        result = facesim_process(["speak", *map(str, args), "-o", str(tmp_path / "x.mp4")], cwd=tmp_path, timeout=300)
         assert result.returncode == 2 and fragment in result.stderr, (args, result.stderr)
         assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
     assert sorted(tmp_path.iterdir()) == before
@@ -329,8 +325,7 @@ def test_a_speaking_specs_npz_keeps_its_sound_beside_its_frames(sentences, tmp_p
 
 def test_an_output_without_sound_says_so_and_a_recording_takes_no_voice(tmp_path):
     out = tmp_path / "hi.gif"
-    result = subprocess.run([sys.executable, "-m", "facesim", "say", "Hi", "-o", str(out), "--size", "64x64"],
-                            capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    result = facesim_process(["say", "Hi", "-o", str(out), "--size", "64x64"], cwd=tmp_path, timeout=300)
     assert result.returncode == 0 and "hi.gif: carries no sound" in result.stderr and out.stat().st_size > 0
     from pydantic import ValidationError
 
