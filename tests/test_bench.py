@@ -30,7 +30,7 @@ def test_bench_quick_prints_every_table_with_sensible_figures(tmp_path):
                             capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert result.returncode == 0, result.stderr[-3000:]
     for title in ("Table 3.1", "Table 3.2", "Table 3.3", "Numba against the NumPy reference", "two solvers",
-                  "Compilation", "fresh process", "Scaling", "Vertex order", "Rendering", "overlapped", "default head",
+                  "Compilation", "fresh process", "Scaling", "Scaling by the default solver", "Vertex order", "Rendering", "overlapped", "default head",
                   "Memory: a long clip", "First run", "Targets"):
         assert title in result.stdout
     assert "happy" in result.stdout and "disgusted anger" in result.stdout
@@ -56,6 +56,10 @@ def test_bench_quick_prints_every_table_with_sensible_figures(tmp_path):
     for run in (first, later):
         assert 0 < run["wall"] < 120 and {"imports", "model", "GL context", "drawing", "encoding"} <= set(run["phases"])
     assert "kernels" not in first["phases"]
+    # the default solver's factor on the Hopper face and its subdivision: larger per vertex on the finer mesh
+    default = [f["default_solver"][n] for n in ("468", "1790")]
+    assert all(row["ns"] > 0 and row["megabytes"] > 0 for row in default)
+    assert default[1]["blocks_per_vertex"] > default[0]["blocks_per_vertex"] > 1
     assert len(f["vertex_order"]) == 4 and all(v > 0 for v in f["vertex_order"].values())
     run = f["overlap"]  # both ways wrote the frames, and drawing them took longer than simulating them
     assert run["frames"] == 35 and run["after"] > run["sim"] > 0 and run["overlapped"] > 0
