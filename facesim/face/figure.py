@@ -543,13 +543,8 @@ def _over_iris(x: np.ndarray, head: Head, side: str, triangles: np.ndarray) -> n
 
 
 def _components(triangles: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    n = rows.max() + 1
-    e = triangles[:, [0, 1, 1, 2]].reshape(-1, 2)
-    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
+    """The pieces of ``rows`` that ``triangles`` join, in the order of their smallest vertex."""
+    label = mesh.component_labels(triangles[:, [0, 1, 1, 2]].reshape(-1, 2), rows.max() + 1)
     return [rows[label[rows] == k] for k in np.unique(label[rows])]
 
 

@@ -49,8 +49,9 @@ def diagnose(mesh: FaceMesh) -> list[str]:
                         "some triangles are flipped against their neighbours")
     if not mesh.boundary_loops:
         problems.append("no boundary: a closed head; facesim animates an open face mask whose rim it pins")
-    if mesh.connected_components() > 1:
-        problems.append(f"{mesh.connected_components()} separate pieces; a face is one surface")
+    pieces = mesh.connected_components()
+    if pieces > 1:
+        problems.append(f"{pieces} separate pieces; a face is one surface")
     height = float(np.ptp(mesh.vertices[:, 1]))
     if not 5.0 <= height <= 50.0:
         problems.append(f"{height:g} units tall: expected centimetres (a face is about 15-20 cm); wrong units?")

@@ -37,6 +37,22 @@ def inverse_permutation(order: np.ndarray) -> np.ndarray:
     return place
 
 
+def component_labels(edges: np.ndarray, n: int) -> np.ndarray:
+    """(n,) each vertex's connected component of the graph of ``edges`` (e, 2), labelled by
+    its smallest vertex: each vertex takes the smallest label among its neighbours' until
+    none changes (as many rounds as the graph is wide: 15 on the head's skin). Every mesh
+    is checked when it loads, and SciPy's graph module took 0.05-0.07 s of a warm render
+    to import for it."""
+    label = np.arange(n)
+    while True:
+        smaller = label.copy()
+        np.minimum.at(smaller, edges[:, 0], label[edges[:, 1]])
+        np.minimum.at(smaller, edges[:, 1], label[edges[:, 0]])
+        if np.array_equal(smaller, label):
+            return label
+        label = smaller
+
+
 def unique_edges(faces: np.ndarray) -> np.ndarray:
     """(e, 2) int64: the unique undirected edges of triangles, smaller index first."""
     e = np.sort(np.asarray(faces)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
@@ -145,19 +161,8 @@ class FaceMesh:
         return float(np.linalg.norm(np.ptp(self.vertices, axis=0)))
 
     def connected_components(self) -> int:
-        """How many separate pieces the mesh is: each vertex takes the smallest label among
-        its neighbours' until none changes (as many rounds as the mesh is wide: 15 on the
-        head's skin). Every mesh is checked when it loads, and SciPy's graph module took
-        0.05-0.07 s of a warm render to import for it."""
-        e = self.edges
-        label = np.arange(self.vertex_count)
-        while True:
-            smaller = label.copy()
-            np.minimum.at(smaller, e[:, 0], label[e[:, 1]])
-            np.minimum.at(smaller, e[:, 1], label[e[:, 0]])
-            if np.array_equal(smaller, label):
-                return len(np.unique(label))
-            label = smaller
+        """How many separate pieces the mesh is (``component_labels``)."""
+        return len(np.unique(component_labels(self.edges, self.vertex_count)))
 
 
 def triangle_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
