@@ -23,6 +23,7 @@ import atexit
 import json
 import os
 import select
+import shutil
 import signal
 import subprocess
 import sys
@@ -104,6 +105,7 @@ class _Server:
         return self.process.stdout.readline().strip()
 
     def run(self, args: list[str], cwd, env: dict, timeout: float) -> subprocess.CompletedProcess:
+        command = [sys.executable, "-m", "facesim", *args]  # what the result names, as subprocess.run's would
         with self.lock:
             out, err = self.folder / "stdout", self.folder / "stderr"
             request = dict(args=args, cwd=str(cwd or os.getcwd()), env=dict(env), stdout=str(out), stderr=str(err))
@@ -115,15 +117,16 @@ class _Server:
             except TimeoutError:
                 os.kill(pid, signal.SIGKILL)
                 self._line(30)
-                raise subprocess.TimeoutExpired([sys.executable, "-m", "facesim", *args], timeout) from None
+                raise subprocess.TimeoutExpired(command, timeout) from None
             global cpu
             cpu += float(seconds)
-            return subprocess.CompletedProcess([sys.executable, "-m", "facesim", *args], int(code),
-                                               out.read_text(errors="replace"), err.read_text(errors="replace"))
+            return subprocess.CompletedProcess(command, int(code), out.read_text(errors="replace"),
+                                               err.read_text(errors="replace"))
 
     def close(self) -> None:
         self.process.stdin.close()
         self.process.wait(timeout=30)
+        shutil.rmtree(self.folder, ignore_errors=True)
 
 
 _server: _Server | None = None
