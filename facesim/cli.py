@@ -739,14 +739,11 @@ def mesh_align(
 ):
     """Move, turn and scale a mesh onto the Hopper face (meshes/face.obj) by named landmarks
     (a similarity fit) and write it with the head's calibrated muscles carried to it by position."""
-    import yaml
-
     from .config import HOPPER_MESH, muscles_file
     from .face.align import align, load_landmarks
     from .face.loading import check_face, load_mesh, obj_text
-    from .face.muscle_file import MuscleFile, load_muscles, muscles_as_points
+    from .face.muscle_file import carried_text, load_muscles
     from .files import atomic_path
-    from .schema import load_model
 
     muscles_out = muscles_out or output.with_suffix("").with_suffix(".muscles.yaml")
     for path in (output, muscles_out):
@@ -755,12 +752,11 @@ def mesh_align(
     default = load_mesh(HOPPER_MESH)
     aligned, residual = align(face, load_landmarks(landmarks, face), default)
     source = muscles_file(muscles)
-    carried = muscles_as_points(load_model(source, MuscleFile), default)
+    carried = carried_text(source, default)
     # both files written under temporary names and checked together; renamed only if every muscle snaps
     with atomic_path(output, replace=force) as obj_tmp, atomic_path(muscles_out, replace=force) as muscles_tmp:
         obj_tmp.write_text(obj_text(aligned, header=f"{mesh} aligned to the Hopper face by {landmarks}"))
-        muscles_tmp.write_text(f"# {source.name} carried by position from the Hopper face to {output.name}.\n"
-                               + yaml.safe_dump(carried.model_dump(mode="json"), sort_keys=False))
+        muscles_tmp.write_text(f"# {source.name} carried by position from the Hopper face to {output.name}.\n" + carried)
         resolved = load_muscles(muscles_tmp, check_face(load_mesh(obj_tmp), output), source=str(muscles_out))
     typer.echo(f"wrote {output} and {muscles_out}: {resolved.count} muscles; landmark residuals "
                f"median {np.median(residual):.2f} cm, largest {residual.max():.2f} cm", err=True)

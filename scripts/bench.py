@@ -466,18 +466,16 @@ def default_solver_scaling(levels: int, repeats: int, thesis: dict) -> tuple[str
     Loop-subdivided: its factorised preconditioner's size and time to factorise, and the
     cost per vertex-step on one thread against the thesis's update (``thesis``: the
     scaling table's figures, by vertex count)."""
-    import yaml
-
     from facesim.config import DEFAULT_MUSCLES
     from facesim.face.loading import write_obj
+    from facesim.face.muscle_file import carried_text
     from facesim.physics import solver
 
     base = load_mesh(HOPPER_MESH)
-    carried = muscles_as_points(load_model(DEFAULT_MUSCLES, MuscleFile), base)
     rows, figures, base_steps = [], {}, None
     with tempfile.TemporaryDirectory() as scratch:
         muscles = Path(scratch) / "face.muscles.yaml"
-        muscles.write_text(yaml.safe_dump(carried.model_dump(mode="json")))
+        muscles.write_text(carried_text(DEFAULT_MUSCLES, base))
         for level in range(levels + 1):
             mesh = Path(scratch) / f"face{level}.obj"
             write_obj(mesh, subdivide(base, level) if level else base)

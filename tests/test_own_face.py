@@ -15,7 +15,7 @@ from facesim.animation.spec import load_spec
 from facesim.config import DEFAULT_MUSCLES, HOPPER_MESH, HOPPER_MUSCLES, LIBRARY
 from facesim.face.loading import load_mesh, write_obj
 from facesim.face.material import MaterialSpec, over_muscle_file
-from facesim.face.muscle_file import MuscleFile, muscles_as_points
+from facesim.face.muscle_file import MuscleFile, carried_text
 from facesim.physics.mesh import subdivide
 from facesim.schema import load_model
 
@@ -25,8 +25,7 @@ def subdivision(root, times, muscles=DEFAULT_MUSCLES):
     smoothed) and a muscle file (the default: the head's calibrated one) carried to it by position."""
     base = load_mesh(HOPPER_MESH)
     write_obj(root / "face.obj", subdivide(base, times))
-    carried = muscles_as_points(load_model(muscles, MuscleFile), base)
-    (root / "face.muscles.yaml").write_text(yaml.safe_dump(carried.model_dump(mode="json")))
+    (root / "face.muscles.yaml").write_text(carried_text(muscles, base))
     return root / "face.obj", root / "face.muscles.yaml"
 
 

@@ -390,3 +390,13 @@ def muscles_as_points(spec: MuscleFile, mesh: FaceMesh) -> MuscleFile:
         "muscles": muscles, "jaw": jaw, "eyelids": [carried(e, "upper", "lower") for e in spec.eyelids],
         "pinned": spec.pinned.model_copy(update={"vertices": []}),
     })
+
+
+def carried_text(source: str | Path, mesh: FaceMesh) -> str:
+    """The muscle file at ``source`` with its muscles as points on ``mesh`` (the face
+    its indices name; ``muscles_as_points``), as YAML: what `facesim mesh align` writes
+    beside an aligned mesh, and a subdivided face's file in the tests and the benchmark."""
+    import yaml
+
+    carried = muscles_as_points(load_model(Path(source), MuscleFile), mesh)
+    return yaml.safe_dump(carried.model_dump(mode="json"), sort_keys=False)
