@@ -1255,7 +1255,8 @@ def main() -> int:
             "thesis's update per vertex-step (its peak resident memory at 27,614 vertices was 3.4 GB, 2026-12-07). "
             "Not yet solved: orderings other than SuperLU's minimum degree filled more (on 6,990 vertices, the "
             "vertex graph's factor's entries per vertex: COLAMD 75, MMD on AᵀA 87, reverse Cuthill-McKee 183, a "
-            "geometric nested dissection 90-97, against 64), and SuperLU's incomplete factorisation (drop 1e-4) halved the factor but took more "
+            "geometric nested dissection 90-97, against 64), and SuperLU's incomplete factorisation (drop 1e-4) "
+            "halved the factor but took more "
             "iterations: 2.98 -> 2.12 s on 6,990 vertices, 3.2 -> 14.7 µs a vertex-step on 27,614 (2026-12-07). "
             "A preconditioner that scales (multigrid) is what a mesh this fine needs.")
     text, order_figures = vertex_orders(1 if quick else 3, repeats)

@@ -30,7 +30,8 @@ def test_bench_quick_prints_every_table_with_sensible_figures(tmp_path):
                             capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert result.returncode == 0, result.stderr[-3000:]
     for title in ("Table 3.1", "Table 3.2", "Table 3.3", "Numba against the NumPy reference", "two solvers",
-                  "Compilation", "fresh process", "Scaling", "Scaling by the default solver", "Vertex order", "Rendering", "overlapped", "default head",
+                  "Compilation", "fresh process", "Scaling", "Scaling by the default solver", "Vertex order", "Rendering",
+                  "overlapped", "default head",
                   "Memory: a long clip", "First run", "Targets"):
         assert title in result.stdout
     assert "happy" in result.stdout and "disgusted anger" in result.stdout

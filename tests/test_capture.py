@@ -88,7 +88,8 @@ def test_shapes_the_performance_does_not_move_stay_near_rest(round_trip):
     with the ridge alone eyeWideRight reached 0.92 and three others 0.7-0.8)."""
     spec, _, performance, _ = round_trip
     moved = {track.target for track in spec.timeline}
-    others = {name: round(float(performance.weights[:, k].max()), 2) for k, name in enumerate(SOLVED) if name not in moved}
+    others = {name: round(float(performance.weights[:, k].max()), 2)
+              for k, name in enumerate(SOLVED) if name not in moved}
     assert max(others.values()) < 0.6, sorted(others.items(), key=lambda item: -item[1])[:5]
 
 
@@ -246,8 +247,8 @@ def test_a_textured_face_is_read_with_its_own_turns(photo_clips, round_trip):
     assert "misreading as measured on facesim's default head" in (root / "performance.yaml").read_text()
 
 
-@pytest.mark.xfail(strict=True, reason="a textured face's right smile comes back at 0.79-0.86, its inner brows at 0.55-0.57 "
-                   "and the head 4.8-8.7 degrees off (docs/capture.md)")
+@pytest.mark.xfail(strict=True, reason="a textured face's right smile comes back at 0.79-0.86, its inner brows at "
+                   "0.55-0.57 and the head 4.8-8.7 degrees off (docs/capture.md)")
 @pytest.mark.parametrize("clip", ["photo look", "onto"])
 def test_a_photos_face_animated_is_captured_back(photo_clips, clip):
     check_round_trip(*photo_clips[clip])

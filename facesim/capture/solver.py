@@ -443,9 +443,9 @@ def _shapes_in_the_image(points: np.ndarray, neutral: np.ndarray, misread: np.nd
     ``Basis.image_residual``) allowed for, and the landmarks' image positions (x, y)
     solved by bounded least squares with a ridge and the sparsity prior (``SPARSITY``)
     for the shapes' weights, turned and scaled by that fit, and for the fit's small
-    corrections (``_pose_differential``). A turned face's hidden side, whose depth MediaPipe guesses, counts only as far as it
-    shows. Returns the weights, and the landmarks' RMS distance from the solved face (cm
-    on the head, as counted)."""
+    corrections (``_pose_differential``). A turned face's hidden side, whose depth
+    MediaPipe guesses, counts only as far as it shows. Returns the weights, and the
+    landmarks' RMS distance from the solved face (cm on the head, as counted)."""
     from scipy.optimize import lsq_linear
 
     rigid = list(RIGID)
