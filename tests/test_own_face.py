@@ -62,7 +62,7 @@ def test_the_material_scales_with_the_skin_area_per_vertex(subdivided):
     assert fine.vertex_count == 1790 and 0.2 < fine.resolution < 0.3
     s = fine.resolution
     assert fine.material.mass == pytest.approx(s) and fine.material.tissue == pytest.approx(300 * s)
-    assert fine.material.substeps == 2 and fine.length_unit == pytest.approx(np.sqrt(s))
+    assert fine.material.substeps == 1 and fine.length_unit == pytest.approx(np.sqrt(s))  # the implicit step's
     thesis = MaterialSpec(preset="thesis")
     assert model_for(on(spec.with_overrides(material=thesis), subdivided)).material.substeps == 8
     assert fine.muscle_force.sum() == pytest.approx(s * default.muscle_force.sum())

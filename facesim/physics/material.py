@@ -72,5 +72,7 @@ def resolved_material(material: Material, resolution: float) -> Material:
     """The material per vertex on a mesh of resolution scale s (facesim.physics.model)."""
     s = resolution
     substeps = material.substeps or SUBSTEPS[material.solver]
+    if material.solver == "quasi-implicit":  # an explicit update: stable only as its fastest spring allows
+        substeps = max(substeps, round(substeps / np.sqrt(s)))
     return replace(material, mass=material.mass * s, damping=material.damping * np.sqrt(s), tissue=material.tissue * s,
-                   drive=material.drive * s, substeps=max(substeps, round(substeps / np.sqrt(s))))
+                   drive=material.drive * s, substeps=substeps)

@@ -21,11 +21,18 @@ drive springs and the muscle force it receives are multiplied by s, which keeps 
 per area and the mass per area of the skin; the springs keep k0 (a triangular spring
 lattice's sheet stiffness does not depend on its edge length); the non-linearity of eq.
 3.6 and 3.7 reads the stretch in units of √s (the edge length relative to the default's);
-the sub-steps grow as 1/√s, since the lighter vertices on the same springs oscillate
-√(1/s) times faster; and the damping c goes as √s, which keeps the springs' damping ratio
-c / (2 √(k0 m)). Damping as s (per area) left the finer mesh's spring modes half as
+the thesis's quasi-implicit update takes 1/√s times the sub-steps, since the lighter
+vertices on the same springs oscillate √(1/s) times faster and an explicit update is
+stable only within their period; and the damping c goes as √s, which keeps the springs'
+damping ratio c / (2 √(k0 m)). Damping as s (per area) left the finer mesh's spring modes half as
 damped: measured on the default face subdivided once, happy then crept without settling
 and folded three lip-corner triangles; with √s it settles and folds none.
+
+The implicit step (the default) is stable at any step and keeps one per frame of at most
+10 ms on any mesh: on the Hopper face subdivided twice (6,990 vertices), one step where
+the rule above took four moved the library's specs by 0.07-0.85 mm (1-4% of their
+motion), less than four steps against one move them on the face it refines (0.2-2.3 mm,
+2-12%), for a quarter of the steps (2026-12-07).
 """
 
 from __future__ import annotations
