@@ -111,7 +111,7 @@ def test_every_face_takes_the_calibrated_muscles_by_default(face, request):
     assert face != "hopper" or lip_corner_lift(thesis) < 0.05  # the preset the thesis's tables name
 
 
-@pytest.mark.parametrize("face", ["hopper", "subdivided", pytest.param("subdivided_twice", marks=pytest.mark.heavy(90))])
+@pytest.mark.parametrize("face", ["hopper", "subdivided", pytest.param("subdivided_twice", marks=pytest.mark.heavy(30))])
 def test_no_library_expression_inverts_a_triangle_on_the_hopper_face_or_its_subdivisions(face, request):
     """Every spec of the library (blink too, whose lids on a finer mesh have edge vertices
     between the muscle file's points: held still, they folded at the eye's corners)."""
