@@ -209,22 +209,46 @@ def bake(head, camera, photo: np.ndarray, vertex_colour: np.ndarray, atlas=None)
     _bake(texel, corners, tile.astype(np.int64), group, pixels, depth, facing, np.ascontiguousarray(vertex_colour[:, :3], dtype=np.float64),
           zbuffer, owner, image, tolerance, GRAZING[0], GRAZING[1], colour, weight, covered, tone, visible)
     seen = (covered == 1) & (weight >= 0.99)  # the face's skin seen face-on
+    scale = np.ones(3)
     if seen.sum() > 50:  # facesim's colours of the skin scaled to the photo's skin; the eyes stay painted
-        skin = (covered == 1) | (covered == 2)
-        tone[skin] *= np.median(colour[seen], axis=0) / np.asarray(SKIN[:3])
+        scale = np.median(colour[seen], axis=0) / np.asarray(SKIN[:3])
     # what was seen keeps the photo's colour; beyond it the nearest colour seen fades into
     # the tone over FEATHER texels
     full = weight >= 0.99
     if full.any():
-        distance, (iy, ix) = distance_transform_edt(~full, return_indices=True)
-        fade = np.clip(distance / FEATHER, 0.0, 1.0)[:, :, None]
-        beyond = (1.0 - fade) * colour[iy, ix] + fade * tone
-    else:
-        beyond = tone
-    result = weight[:, :, None] * colour + (1.0 - weight[:, :, None]) * beyond
-    onto = np.where(visible, weight, 1.0)
+        distance, (seen_y, seen_x) = distance_transform_edt(~full, return_indices=True)
+    else:  # nothing seen fully: the tone everywhere beyond
+        distance, seen_y, seen_x = np.full(shape, np.inf), np.zeros(shape, np.int64), np.zeros(shape, np.int64)
     # texels no triangle covers take the nearest covered one's values, so that filtering
     # at an island's edge does not bleed black
-    _, (iy, ix) = distance_transform_edt(covered == 0, return_indices=True)
-    return (np.clip(np.rint(result[iy, ix] * 255.0), 0, 255).astype(np.uint8),
-            np.clip(np.rint(onto[iy, ix] * 255.0), 0, 255).astype(np.uint8))
+    covered_y, covered_x = distance_transform_edt(covered == 0, return_distances=False, return_indices=True)
+    texture, onto = np.empty(shape + (3,), np.uint8), np.empty(shape, np.uint8)
+    _composite(colour, weight, tone, covered, visible, scale, distance, seen_y, seen_x, covered_y, covered_x,
+               float(FEATHER), texture, onto)
+    return texture, onto
+
+
+@njit(**NUMBA_OPTIONS)
+def _composite(colour, weight, tone, covered, visible, scale, distance, seen_y, seen_x, covered_y, covered_x,
+               feather, texture, onto):
+    """Step 3 of the module docstring, every texel of the atlas at once: at the covered
+    texel nearest it (``covered_y``, ``covered_x``: itself where a triangle covers it), the
+    photo's colour by its weight over the nearest colour seen fully (``seen_y``,
+    ``seen_x``, ``distance`` away) fading into the tone (scaled by ``scale`` on the skin's
+    two tiles, ``covered`` 1 and 2) over ``feather`` texels; into ``texture`` (uint8), and
+    the --onto alpha (the weight where the photo saw the texel, else 1) into ``onto``."""
+    rows, cols = weight.shape
+    for y in range(rows):
+        for x in range(cols):
+            py, px = covered_y[y, x], covered_x[y, x]
+            w = weight[py, px]
+            fade = min(max(distance[py, px] / feather, 0.0), 1.0)
+            qy, qx = seen_y[py, px], seen_x[py, px]
+            skin = covered[py, px] == 1 or covered[py, px] == 2
+            for ch in range(3):
+                t = tone[py, px, ch] * scale[ch] if skin else tone[py, px, ch]
+                beyond = (1.0 - fade) * colour[qy, qx, ch] + fade * t
+                value = w * colour[py, px, ch] + (1.0 - w) * beyond
+                texture[y, x, ch] = np.uint8(min(max(np.rint(value * 255.0), 0.0), 255.0))
+            alpha = w if visible[py, px] else 1.0
+            onto[y, x] = np.uint8(min(max(np.rint(alpha * 255.0), 0.0), 255.0))
