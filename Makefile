@@ -65,7 +65,8 @@ test: test-packages $(VENV)/.photo tests/js/node_modules/.installed
 bench: setup
 	$(BIN)/python scripts/bench.py
 
-# the kernels that ship compiled (facesim/compiled): run after any change to a file with kernels
+# the kernels that ship compiled (facesim/compiled): run after any change to a file with kernels,
+# and the capture basis that ships beside them: after any change to facesim/capture/solver.py
 # (with the photo extra: a photo's first commands ship compiled too)
 kernels: setup $(VENV)/.photo
 	$(BIN)/python scripts/build_kernels.py

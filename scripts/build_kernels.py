@@ -1,4 +1,5 @@
-"""Compile facesim's kernels ahead, for the package to ship: `make kernels`.
+"""Compile facesim's kernels ahead, for the package to ship: `make kernels`; and measure
+the capture's basis on the default head (facesim.capture.solver.SHIPPED_BASIS), which ships too.
 
 A new user's first `facesim render` compiled every Numba kernel it ran, about a minute on
 two cores (issue 45). facesim compiles for the CPU's baseline (facesim.config._portable_target),
@@ -61,6 +62,23 @@ carried = muscles_as_points(load_model(DEFAULT_MUSCLES, MuscleFile), base)
 open(sys.argv[1] + "/fine.muscles.yaml", "w").write(yaml.safe_dump(carried.model_dump(mode="json")))
 """
 
+#: Measures the default head's capture basis (facesim.capture.solver.head_basis: its shapes
+#: and turns rendered and read by MediaPipe, about 20 s) and writes it, with the key it was
+#: measured from, where the package ships it (SHIPPED_BASIS); the floats as float32.
+CAPTURE_BASIS = """
+import os, sys
+import numpy as np
+from facesim.animation.spec import Spec
+from facesim.capture import solver
+spec = Spec(name="capture")
+rest, _ = solver._landmarks_at_rest(spec)
+arrays = {name: value.astype(np.float32) for name, value in solver._rendered(spec, rest, shapes=True).items()}
+partial = str(solver.SHIPPED_BASIS) + ".partial.npz"
+np.savez_compressed(partial, key=np.array(solver.basis_key(spec, rest)), **arrays)
+os.replace(partial, solver.SHIPPED_BASIS)
+print(f"wrote {solver.SHIPPED_BASIS}: {os.path.getsize(solver.SHIPPED_BASIS) / 1e6:.1f} MB")
+"""
+
 
 def _tar_info(info: tarfile.TarInfo) -> tarfile.TarInfo:
     """The same archive for the same kernels: no owner, no time."""
@@ -71,6 +89,8 @@ def _tar_info(info: tarfile.TarInfo) -> tarfile.TarInfo:
 
 
 def main() -> int:
+    if sys.argv[1:] == ["--capture-basis"]:  # the basis alone: after an edit to the capture's solver
+        return subprocess.run([sys.executable, "-c", CAPTURE_BASIS], cwd=ROOT, check=True).returncode
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
         env = dict(os.environ, NUMBA_CACHE_DIR=str(scratch / "numba"), FACESIM_CACHE=str(scratch / "facesim"),
@@ -102,6 +122,7 @@ def main() -> int:
         files = sum(1 for path in folder.rglob("*") if path.is_file())
         print(f"wrote {target / 'kernels.tar.xz'}: {files} files, "
               f"{(target / 'kernels.tar.xz').stat().st_size / 1e6:.1f} MB, for {key}")
+        subprocess.run([sys.executable, "-c", CAPTURE_BASIS], cwd=ROOT, env=env, check=True)
     return 0
 
 

@@ -46,6 +46,26 @@ def agreement(spec, performance) -> dict:
     return out
 
 
+def test_the_default_heads_basis_ships_measured_from_this_code(tmp_path, monkeypatch):
+    """A new user's first capture loads the default head's basis from the package, not
+    measuring it for 20 s (facesim.capture.solver.SHIPPED_BASIS): it is this code's (an
+    edit to the solver needs `python scripts/build_kernels.py --capture-basis`), and it is
+    the head's: opening the jaw moves the chin down, a blink closes its own eye's lids."""
+    from facesim.capture import solver
+
+    monkeypatch.setenv("FACESIM_CACHE", str(tmp_path))  # nothing cached
+    monkeypatch.setattr(solver, "_rendered", lambda *args, **kwargs: pytest.fail(
+        "the shipped capture basis is not this code's: run `python scripts/build_kernels.py --capture-basis`"))
+    basis = solver.head_basis(Spec(name="capture"))
+    assert basis.motion.shape == (len(SOLVED), 470, 3) and basis.turns["grid_residual"].shape[2:] == (468, 2)
+    motion = {name: basis.motion[SOLVED.index(name)] for name in ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight")}
+    assert motion["jawOpen"][152, 1] < -1.0  # the chin, cm per unit weight
+    for blink, (upper, lower), other in (("eyeBlinkLeft", (386, 374), (159, 145)), ("eyeBlinkRight", (159, 145), (386, 374))):
+        gap = motion[blink][:, 1]
+        assert gap[upper] - gap[lower] < -0.4 and abs(gap[other[0]] - gap[other[1]]) < 0.1
+    assert not list(tmp_path.glob("capture-basis-*"))  # nor kept again in the cache
+
+
 @pytest.fixture(scope="module")
 def round_trip(tmp_path_factory):
     root = tmp_path_factory.mktemp("capture")

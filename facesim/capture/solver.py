@@ -1,9 +1,10 @@
 """From tracked landmarks to a performance: the head's pose, the eyes' gaze and ARKit's
 shapes per frame, solved against facesim's own landmark motion as MediaPipe sees it.
 
-1. **The basis** (``head_basis``, kept in facesim's cache). Each shape held by the physics
-   on the default head at ``BASIS_WEIGHTS``, rendered from the front, its landmarks found
-   and put into the head's frame; its motion per unit weight is the slope through them.
+1. **The basis** (``head_basis``: the default head's ships with the package, another
+   head's is kept in facesim's cache). Each shape held by the physics on the default head
+   at ``BASIS_WEIGHTS``, rendered from the front, its landmarks found and put into the
+   head's frame; its motion per unit weight is the slope through them.
    The neutral head turned by known angles, each render read as a video's frame is
    (tracking.read_as_video), measures how MediaPipe misreads a turned head: its angles
    (``TURNS``) and, on a yaw-by-pitch grid, its landmarks in the image (``GRID``,
@@ -175,6 +176,12 @@ def _between(grid: np.ndarray, value: float) -> tuple[int, int, float]:
     return j, j + 1, float(np.clip((value - grid[j]) / (grid[j + 1] - grid[j]), 0.0, 1.0))
 
 
+#: The default head's basis, measured by ``make kernels`` (scripts/build_kernels.py) and
+#: shipped with the package (facesim/compiled), so that a new user's first capture does not
+#: spend its first 20 s rendering and reading the head's shapes and turns (about 290
+#: renders); used when its ``basis_key`` is this code's and head's (the suite fails when it
+#: is not: tests/test_capture.py).
+SHIPPED_BASIS = Path(__file__).resolve().parent.parent / "compiled" / "capture_basis.npz"
 #: The renders the basis is measured on: their size, and the frames each shape is held.
 BASIS_SIZE, BASIS_FRAMES = 384, 30
 #: The weights each shape is held at: its motion per unit weight is the least-squares
@@ -207,15 +214,37 @@ def head_basis(spec) -> Basis:
     held at full weight by the physics, rendered from the front, its landmarks found and
     put into the head's frame as a video's are (``canonical``), less the neutral render's;
     and the head's turns (``TURNS``, ``GRID``). Measured once and kept in facesim's cache
-    (facesim.cache) by the code and the head."""
+    (facesim.cache) by the code and the head; the default head's ships with the package
+    (``SHIPPED_BASIS``)."""
+    from .. import cache
+
+    rest, radius = _landmarks_at_rest(spec)
+    digest = basis_key(spec, rest)
+    stored = _shipped_basis(digest)
+    if stored is None:
+        stored = cache.cached_arrays("capture-basis", digest, lambda: _rendered(spec, rest, shapes=True), keep=2)
+    return Basis(rest, stored["motion"], radius, {k: v for k, v in stored.items() if k != "motion"})
+
+
+def basis_key(spec, rest: np.ndarray) -> str:
+    """What ``head_basis`` is measured from, hashed: this code, facesim's version, the head
+    at rest (``rest``: its landmarks), its muscles and material, and the shapes solved."""
     from .. import cache
     from ..config import VERSION
 
-    rest, radius = _landmarks_at_rest(spec)
-    parts = [Path(__file__).read_bytes(), VERSION.encode(), rest.tobytes(), spec.muscles_path.read_bytes(),
-             spec.material.model_dump_json().encode(), " ".join(SOLVED).encode()]
-    stored = cache.cached_arrays("capture-basis", cache.key(*parts), lambda: _rendered(spec, rest, shapes=True), keep=2)
-    return Basis(rest, stored["motion"], radius, {k: v for k, v in stored.items() if k != "motion"})
+    return cache.key(Path(__file__).read_bytes(), VERSION.encode(), rest.tobytes(), spec.muscles_path.read_bytes(),
+                     spec.material.model_dump_json().encode(), " ".join(SOLVED).encode())
+
+
+def _shipped_basis(digest: str) -> dict[str, np.ndarray] | None:
+    """The shipped basis's arrays if it was measured from what ``digest`` hashes, else None."""
+    try:
+        with np.load(SHIPPED_BASIS, allow_pickle=False) as stored:
+            if str(stored["key"]) != digest:
+                return None
+            return {name: stored[name].astype(np.float64) for name in stored.files if name != "key"}
+    except (OSError, KeyError, ValueError):  # not shipped (a source tree without it), or unreadable
+        return None
 
 
 def face_turns(face: Path, grid: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
