@@ -102,7 +102,7 @@ def test_every_face_takes_the_calibrated_muscles_by_default(face, request):
     either Loop-subdivided once or twice with the muscles carried by position) takes the
     head's calibrated muscles, not the thesis's: happy lifts the lip corners at least 8% of
     the mouth's width (the thesis's lifted them 3.8% on the Hopper face, and folded the
-    twice-subdivided face at the mouth's inner corners). Measured: 17.6%, 12.4%, 18.3%, 15.8%."""
+    twice-subdivided face at the mouth's inner corners). Measured 2026-12-07: 23.7%, 16.4%, 23.8%, 20.0%."""
     where = request.getfixturevalue(face)
     spec = on(load_spec(EXPRESSIONS / "happy.yaml"), where)
     assert spec.muscles_path == (where[1] or DEFAULT_MUSCLES)
@@ -138,9 +138,9 @@ MOVED = {"happy": (61, 291), "sad": (61, 291), "angry": (9,)}
 @pytest.mark.parametrize("name", ["happy", "sad", "angry"])
 def test_a_subdivided_face_moves_like_the_one_it_refines(subdivided, name):
     """The points an expression is about move alike on the Hopper face and on its Loop
-    subdivision (same muscle file, carried by position). Measured: 15% apart for happy's
-    lip corners, 22% for sad's, 35% for angry's glabella, which the one midline procerus
-    pulls over a region the finer mesh resolves differently."""
+    subdivision (same muscle file, carried by position). Measured 2026-12-07: 1% apart for
+    happy's lip corners, 21% for sad's, 12% for angry's glabella, which the one midline
+    procerus pulls over a region the finer mesh resolves differently."""
     spec = load_spec(EXPRESSIONS / f"{name}.yaml")
     coarse = facesim.simulate(spec.with_overrides(mesh=HOPPER_MESH))
     fine = facesim.simulate(on(spec, subdivided))
