@@ -178,7 +178,7 @@ def _between(grid: np.ndarray, value: float) -> tuple[int, int, float]:
 
 #: The default head's basis, measured by ``make kernels`` (scripts/build_kernels.py) and
 #: shipped with the package (facesim/compiled), so that a new user's first capture does not
-#: spend its first 20 s rendering and reading the head's shapes and turns (about 290
+#: spend its first 20 s rendering and reading the head's shapes and turns (330
 #: renders); used when its ``basis_key`` is this code's and head's (the suite fails when it
 #: is not: tests/test_capture.py).
 SHIPPED_BASIS = Path(__file__).resolve().parent.parent / "compiled" / "capture_basis.npz"
