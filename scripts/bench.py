@@ -1258,7 +1258,12 @@ def main() -> int:
             "geometric nested dissection 90-97, against 64), and SuperLU's incomplete factorisation (drop 1e-4) "
             "halved the factor but took more "
             "iterations: 2.98 -> 2.12 s on 6,990 vertices, 3.2 -> 14.7 µs a vertex-step on 27,614 (2026-12-07). "
-            "A preconditioner that scales (multigrid) is what a mesh this fine needs.")
+            "Nor does an algebraic multigrid off the shelf scale here: PyAMG's smoothed aggregation (5.4.1, not a "
+            "dependency), on the rest system with bending, took 23-24 conjugate-gradient iterations to 1e-3 on 6,990 "
+            "vertices and 45-48 on 27,614, doubling with each refinement, against the exact factor's 1-3 "
+            "(2026-12-07): the bending, a fourth-order term, defeats its default aggregation. A multigrid built for "
+            "the bending is what a mesh this fine needs. The implicit step takes one step per frame on every "
+            "mesh (facesim.physics.model), each step on a finer mesh more iterations.")
     text, order_figures = vertex_orders(1 if quick else 3, repeats)
     section("Vertex order", text + "\n\nA mesh of at least 4,000 vertices is simulated in an order of its own "
             "(facesim.physics.model.reordered): reverse Cuthill-McKee on its edge graph (scipy.sparse.csgraph), the springs, "
