@@ -50,16 +50,14 @@ iio.imwrite(sys.argv[1] + "/astronaut.png", data.astronaut())
 """
 #: Writes the large mesh of the last command, and the head's calibrated muscles carried to it by position.
 FINE_MESH = """
-import sys, yaml
+import sys
 from facesim.config import DEFAULT_MUSCLES, HOPPER_MESH
 from facesim.face.loading import load_mesh, write_obj
-from facesim.face.muscle_file import MuscleFile, muscles_as_points
+from facesim.face.muscle_file import carried_text
 from facesim.physics.mesh import subdivide
-from facesim.schema import load_model
 base = load_mesh(HOPPER_MESH)
 write_obj(sys.argv[1] + "/fine.obj", subdivide(base, 2))
-carried = muscles_as_points(load_model(DEFAULT_MUSCLES, MuscleFile), base)
-open(sys.argv[1] + "/fine.muscles.yaml", "w").write(yaml.safe_dump(carried.model_dump(mode="json")))
+open(sys.argv[1] + "/fine.muscles.yaml", "w").write(carried_text(DEFAULT_MUSCLES, base))
 """
 
 #: Measures the default head's capture basis (facesim.capture.solver.head_basis: its shapes

@@ -24,9 +24,10 @@ lattice's sheet stiffness does not depend on its edge length); the non-linearity
 the thesis's quasi-implicit update takes 1/√s times the sub-steps, since the lighter
 vertices on the same springs oscillate √(1/s) times faster and an explicit update is
 stable only within their period; and the damping c goes as √s, which keeps the springs'
-damping ratio c / (2 √(k0 m)). Damping as s (per area) left the finer mesh's spring modes half as
-damped: measured on the default face subdivided once, happy then crept without settling
-and folded three lip-corner triangles; with √s it settles and folds none.
+damping ratio c / (2 √(k0 m)). Damping as s (per area) left the finer mesh's spring
+modes half as damped: measured on the default face subdivided once, happy then crept
+without settling and folded three lip-corner triangles; with √s it settles and folds
+none.
 
 The implicit step (the default) is stable at any step and keeps one per frame of at most
 10 ms on any mesh: on the Hopper face subdivided twice (6,990 vertices), one step where
