@@ -35,14 +35,20 @@ def key(*parts: bytes) -> str:
 def cached_arrays(name: str, digest: str, compute, keep: int = 8) -> dict[str, np.ndarray]:
     """The arrays ``compute()`` returns (a dict of name to array), from the cache when an
     entry ``name``-``digest`` is there and readable, else computed and stored. A new entry
-    makes the entries of ``name`` beyond the ``keep`` most recently written go (``_pruned``):
-    each version of facesim, and each face, writes its own."""
+    makes the entries of ``name`` beyond the ``keep`` most recently used go (``_pruned``):
+    each version of facesim, and each face, writes its own. An entry read is marked used
+    (its modification time): the face rendered every day outlives a batch of other faces
+    run after it, where pruning by when entries were written dropped it."""
     path = directory() / f"{name}-{digest}.npz"
     try:
         with np.load(path, allow_pickle=False) as stored:
-            return {k: stored[k] for k in stored.files}
+            arrays = {k: stored[k] for k in stored.files}
     except Exception:  # absent, truncated or unreadable: computed again below
         pass
+    else:
+        with contextlib.suppress(OSError):  # a read-only cache is still read
+            os.utime(path)
+        return arrays
     arrays = compute()
     partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
     try:
@@ -58,9 +64,9 @@ def cached_arrays(name: str, digest: str, compute, keep: int = 8) -> dict[str, n
 
 
 def _pruned(name: str, keep: int) -> None:
-    """Remove the entries of ``name`` but the ``keep`` most recently written. Only facesim's
-    own entries (``name``-<40 hex digits>.npz) are touched; one another process removed first
-    is skipped."""
+    """Remove the entries of ``name`` but the ``keep`` most recently used (written or read).
+    Only facesim's own entries (``name``-<40 hex digits>.npz) are touched; one another
+    process removed first is skipped."""
     entries = []
     for path in directory().glob(f"{name}-*.npz"):
         digest = path.stem[len(name) + 1:]

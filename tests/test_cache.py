@@ -156,6 +156,27 @@ def test_a_name_keeps_its_latest_entries_and_nothing_else_is_touched(tmp_path, m
     assert all(path.read_bytes() == b"kept" for path in others)
 
 
+def test_an_entry_read_outlives_entries_written_after_it_but_not_read(tmp_path, monkeypatch):
+    """Pruning keeps the entries most recently used: the face rendered every day (read
+    from the cache each time) is not dropped by a batch of other faces run after it."""
+    monkeypatch.setenv("FACESIM_CACHE", str(tmp_path))
+    digests = [cache.key(str(k).encode()) for k in range(5)]
+    computed = []
+
+    def entry(k):
+        return cache.cached_arrays("thing", digests[k], lambda: computed.append(k) or {"a": np.full(2, float(k))},
+                                   keep=3)
+
+    for k in range(3):
+        entry(k)
+        os.utime(tmp_path / f"thing-{digests[k]}.npz", ns=(k * 10**9, k * 10**9))  # written a second apart
+    assert entry(0)["a"][0] == 0.0  # read, not computed: now the most recently used
+    entry(3)  # a fourth written: the least recently used (1) goes
+    assert sorted(p.name for p in tmp_path.glob("thing-*.npz")) == sorted(f"thing-{digests[k]}.npz" for k in (0, 2, 3))
+    entry(0)
+    assert computed == [0, 1, 2, 3]
+
+
 def test_the_heads_preconditioner_read_from_the_cache_is_the_factorised_one(tmp_path, monkeypatch):
     """A fresh process reads the implicit step's factor (facesim.physics.model.Model.preconditioner)
     instead of factorising again: the same arrays; another step size, another entry."""

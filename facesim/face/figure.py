@@ -583,7 +583,9 @@ def _stored_figure(model) -> Figure:
     key = cache.key(*arrays, repr((head.materials, sorted(head.parts.items()))).encode(), *lids,
                     np.ascontiguousarray(model.rest_position).tobytes(), np.asarray(model.rig.jaw_hinge).tobytes(),
                     np.asarray(model.rig.jaw_axis).tobytes(), VERSION.encode(), *(path.read_bytes() for path in FIGURE_CODE))
-    return _figure_from(cache.cached_arrays("figure", key, lambda: _figure_arrays(head_figure(head, model)), keep=4), head)
+    # 3.4 MB each: 16 kept (4 kept, the suite built 55 figures again in a run)
+    stored = cache.cached_arrays("figure", key, lambda: _figure_arrays(head_figure(head, model)), keep=16)
+    return _figure_from(stored, head)
 
 
 def _figure_arrays(figure: Figure) -> dict[str, np.ndarray]:

@@ -187,7 +187,8 @@ def mirror_map(vertices: np.ndarray, faces: np.ndarray | None = None) -> np.ndar
 
     parts = (np.ascontiguousarray(vertices, dtype=np.float64).tobytes(), b"" if faces is None else
              np.ascontiguousarray(faces, dtype=np.int64).tobytes(), Path(__file__).read_bytes())
-    m = cached_arrays("mirror-map", key(*parts), lambda: {"map": _assignment(vertices)})["map"]
+    # a few kB each, kept for many faces: with 8 kept, a test cycling eleven identities computed each again every time
+    m = cached_arrays("mirror-map", key(*parts), lambda: {"map": _assignment(vertices)}, keep=64)["map"]
     if not np.array_equal(m[m], np.arange(len(m))):
         raise ValueError("mirror map is not an involution")
     if faces is not None:

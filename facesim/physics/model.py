@@ -131,7 +131,9 @@ class Model:
             for name, value in zip(self.arrays._fields, self.arrays):
                 value = np.asarray(value)
                 parts.append(f"{name} {value.dtype} {value.shape}".encode() + value.tobytes())
-            stored = cached_arrays("preconditioner", key(*parts), lambda: rest_preconditioner(self, h)._asdict(), keep=16)
+            # 1.1-1.7 MB each on the head: 32 kept, a model's two step sizes for each of the identities a batch cycles
+            stored = cached_arrays("preconditioner", key(*parts), lambda: rest_preconditioner(self, h)._asdict(),
+                                   keep=32)
             self.factors[h] = Factor(**stored)
         return self.factors[h]
 
