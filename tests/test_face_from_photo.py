@@ -191,6 +191,9 @@ def test_command_line(tmp_path, photos):
     result = runner.invoke(app, ["face", "from-photo", str(photos["astronaut"]), "-o", str(out)])
     assert result.exit_code == 0, result.output
     assert "landmarks within" in result.output
+    # her photo smiles with her teeth showing: said, and the face written all the same
+    said = [line for line in result.output.splitlines() if "the face is not at rest" in line]
+    assert len(said) == 1 and "astronaut.png" in said[0] and "lips 8 mm apart" in said[0], result.output
     again = runner.invoke(app, ["face", "from-photo", str(photos["astronaut"]), "-o", str(out)])
     assert again.exit_code == 2 and "already exists" in again.output
     stranger = tmp_path / "mine"
@@ -198,6 +201,32 @@ def test_command_line(tmp_path, photos):
     (stranger / "notes.txt").write_text("mine")
     refused = runner.invoke(app, ["face", "from-photo", str(photos["astronaut"]), "-o", str(stranger), "--force"])
     assert refused.exit_code == 2 and (stranger / "notes.txt").read_text() == "mine"
+
+
+def test_a_photos_expression_is_measured_against_the_fitted_head_at_rest(tmp_path, photos):
+    """What face from-photo bakes into the skin is the photo as it is: a face that is not at
+    rest keeps its expression at rest and moves it (the astronaut's smile, teeth and all,
+    on closed lips), so it is said. facesim's own head is the known case: at rest it is at
+    rest, its surprise parts the lips, its happy apex (lips closed) raises the corners;
+    Grace Hopper's portrait is at rest, the astronaut's is not."""
+    from facesim.face.fit import PHOTO_AT_REST
+
+    lips, corners = PHOTO_AT_REST
+    from facesim.renderer.scene import FaceRenderer
+    from facesim.renderer.settings import RenderSettings
+
+    for name, frames in (("happy", (0, 34)), ("surprise", (34,))):
+        animation = simulate(spec(name))
+        with FaceRenderer.of(animation, RenderSettings(width=512, height=512)) as renderer:
+            for frame in frames:
+                iio.imwrite(tmp_path / f"{name}{frame}.png", renderer.frame(animation, frame))
+    measured = {name: fitted(path).mouth_against_rest() for name, path in (
+        ("rest", tmp_path / "happy0.png"), ("smile", tmp_path / "happy34.png"), ("surprise", tmp_path / "surprise34.png"),
+        ("hopper", photos["hopper"]), ("astronaut", photos["astronaut"]))}
+    assert measured["rest"][0] < lips and measured["rest"][1] < corners, measured
+    assert measured["hopper"][0] < lips and measured["hopper"][1] < corners, measured
+    assert measured["smile"][0] < lips < measured["surprise"][0] and measured["smile"][1] > corners, measured
+    assert measured["astronaut"][0] > 2 * lips and measured["astronaut"][1] > corners, measured
 
 
 @pytest.fixture(scope="module")

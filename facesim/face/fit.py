@@ -52,6 +52,14 @@ MIN_FACE_SIZE = 100
 #: The largest head turn (yaw, degrees) fitted: beyond it the far cheek's landmarks are
 #: guesses behind the nose.
 MAX_YAW = 35.0
+#: A photo's face is at rest when its lips are apart by at most the first (cm) more than
+#: the fitted neutral head's and its mouth's corners raised by at most the second
+#: (``Fit.mouth_against_rest``). Measured (2026-12-07): facesim's head at rest, identity
+#: 7 at rest, its sad face and Grace Hopper's portrait, lips -0.13 to -0.07 and corners
+#: -0.22 to -0.13 (the fit puts the corners a little high); the astronaut's smile with
+#: her teeth showing 0.81 and 0.26, facesim's happy apex -0.01 and 0.28 (a smile with
+#: closed lips), its surprise 1.58 (the jaw open).
+PHOTO_AT_REST = (0.3, 0.1)
 
 
 #: A fitted camera facesim takes from a face directory: a photo of 16 to 65,536 pixels a
@@ -159,6 +167,23 @@ class Fit:
     def residual(self) -> np.ndarray:
         """(468,) each landmark's distance from where MediaPipe found it, in face widths."""
         return np.linalg.norm(self.fitted - self.detected, axis=1) / self.face_width
+
+    def mouth_against_rest(self) -> tuple[float, float]:
+        """How the photo's mouth differs from the fitted head's at rest (cm, at the head's
+        scale): its lips' gap (MediaPipe's inner-lip landmarks 13 and 14) wider by, and its
+        corners (61, 291) nearer the eyes' outer corners (33, 263) by, as a smile raises
+        and widens them; each against the same landmarks of the fitted neutral head as the
+        camera shows it. The identity's modes fit a face's shape, not its expression: what
+        an expression moves is left here (``PHOTO_AT_REST``)."""
+        def gap(points):
+            return np.linalg.norm(points[13] - points[14])
+
+        def corners_to_eyes(points):
+            return (np.linalg.norm(points[61] - points[33]) + np.linalg.norm(points[291] - points[263])) / 2
+
+        scale = self.camera.scale
+        return (float(gap(self.detected) - gap(self.fitted)) / scale,
+                float(corners_to_eyes(self.fitted) - corners_to_eyes(self.detected)) / scale)
 
 
 def landmark_basis(head: Head, head_path) -> tuple[np.ndarray, np.ndarray]:

@@ -215,7 +215,7 @@ def face_from_photo(photo: str | Path, output: str | Path, replace: bool = False
     from ..files import atomic_path
     from .bake import bake
     from .figure import atlas_uv, figure_for
-    from .fit import fit_head
+    from .fit import PHOTO_AT_REST, fit_head
     from .head import load_head
     from .loading import load_face_model
     from .photo import detect_landmarks, read_image
@@ -228,6 +228,14 @@ def face_from_photo(photo: str | Path, output: str | Path, replace: bool = False
     image = read_image(photo)
     landmarks = detect_landmarks(image, str(photo), notice, refine=True)
     fit = fit_head(load_head(HEAD), HEAD, landmarks, image.shape[1], image.shape[0], str(photo))
+    apart, raised = fit.mouth_against_rest()
+    shown = [what for what, shows in ((f"its lips {10 * apart:.0f} mm apart", apart > PHOTO_AT_REST[0]),
+                                      (f"its mouth's corners {10 * raised:.0f} mm raised", raised > PHOTO_AT_REST[1]))
+             if shows]
+    if shown and notice is not None:
+        notice(f"{photo}: the face is not at rest ({' and '.join(shown)}, against the fitted head's): the photo is "
+               "baked into the skin as it is, so the face at rest shows its expression (a smile's teeth on closed "
+               "lips) and moves it; a photo of the face relaxed, lips closed, animates truer")
     identity = tuple(float(w) for w in fit.identity)
     model = load_face_model(HEAD.resolve(), HEAD_MUSCLES.resolve(), identity=identity)
     head = model.mesh.head
@@ -243,6 +251,9 @@ def face_from_photo(photo: str | Path, output: str | Path, replace: bool = False
         landmarks=dict(detector="MediaPipe Face Mesh, 468 landmarks", face_width_pixels=round(fit.face_width, 1),
                        median_residual_face_widths=round(float(np.median(residual)), 5),
                        p90_residual_face_widths=round(float(np.percentile(residual, 90)), 5)),
+        # what of an expression the photo shows, baked into the texture (fit.Fit.mouth_against_rest)
+        expression=dict(lips_parted_mm=round(10 * apart, 1), mouth_corners_raised_mm=round(10 * raised, 1),
+                        at_rest=not shown),
         licence="the head: ICT FaceKit (USC ICT), MIT licence (meshes/ict/LICENSE); the texture: the photo's own",
     )
     header = (f"facesim face from-photo: ICT FaceKit's head (MIT licence, USC ICT) fitted to {photo.name}\n"
