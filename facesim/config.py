@@ -157,16 +157,25 @@ def shipped_kernels_key() -> dict:
                 machine=platform.machine(), cpu=numba.config.CPU_NAME)
 
 
+#: Written into facesim's kernel folder once the shipped kernels are in it.
+SHIPPED_MARK = "shipped.json"
+
+
 def _install_shipped_kernels(folder: str) -> None:
     """Put the kernels that ship compiled where Numba looks for facesim's (``folder``)
     the first time this code runs, when they were compiled from this code for this
     Numba, Python and machine: a new user's first render loads them instead of
     compiling about a minute (scripts/build_kernels.py). A kernel they lack (a large
     mesh's parallel ones) compiles as before and joins them. Unpacked beside the folder
-    and renamed into place; any failure (a read-only cache, a damaged archive) leaves
-    Numba to compile, as without them."""
+    and renamed into place; into a folder that is there already, without
+    ``SHIPPED_MARK`` (this code run before its kernels were built, as a developer does
+    between an edit and `make kernels`), the files it lacks are added, none replaced:
+    kept out of such a folder, a fresh clone's suite compiled the kernels the folder
+    lacked (its benchmark test 108 s against 52, 2026-12-07). Any failure (a read-only
+    cache, a damaged archive) leaves Numba to compile, as without them."""
     archive, stamp = SHIPPED_KERNELS / "kernels.tar.xz", SHIPPED_KERNELS / "kernels.json"
-    if os.environ.get("FACESIM_SHIPPED_KERNELS") == "0" or os.path.exists(folder) or not stamp.is_file():
+    if (os.environ.get("FACESIM_SHIPPED_KERNELS") == "0" or not stamp.is_file()
+            or os.path.exists(os.path.join(folder, SHIPPED_MARK))):
         return
     import contextlib
     import json
@@ -184,7 +193,17 @@ def _install_shipped_kernels(folder: str) -> None:
     try:
         with tarfile.open(archive) as tar:
             tar.extractall(unpacked, filter="data")
-        os.rename(unpacked, folder)  # fails if another process was first: its copy is as good
+        with open(os.path.join(unpacked, SHIPPED_MARK), "w") as mark:
+            mark.write(stamp.read_text())
+        try:
+            os.rename(unpacked, folder)  # fails if the folder is there: another process's copy, or an older one
+        except OSError:
+            for directory, _, files in os.walk(unpacked, topdown=False):  # the top, with the mark, last
+                target = os.path.join(folder, os.path.relpath(directory, unpacked))
+                os.makedirs(target, exist_ok=True)
+                for name in sorted(files, key=lambda name: name == SHIPPED_MARK):
+                    with contextlib.suppress(FileExistsError):  # a link never replaces a file
+                        os.link(os.path.join(directory, name), os.path.join(target, name))
     except (OSError, tarfile.TarError):
         pass
     finally:

@@ -161,6 +161,23 @@ def test_a_new_users_first_render_loads_every_kernel_it_runs_and_compiles_none(t
 
 
 @pytest.mark.skipif(not SHIPPABLE, reason="the kernels ship compiled for x86-64 and Python 3.11")
+def test_the_shipped_kernels_join_a_kernel_folder_that_is_there_already(tmp_path):
+    """This code's kernel folder made before its kernels were built (a developer's run
+    between an edit and `make kernels`) was left as it was, and every run after, a fresh
+    clone's suite on that machine included, compiled what it lacked: the shipped kernels
+    are added to it, nothing in it replaced."""
+    from facesim.config import CODE_DIGEST
+
+    folder = tmp_path / "shipped" / ".cache" / "facesim" / f"numba-{CODE_DIGEST[:16]}"
+    (folder / "physics").mkdir(parents=True)
+    (folder / "physics" / "notes.txt").write_text("mine")
+    counts = render_counts(tmp_path, shipped=True)
+    assert not compiled(counts)  # nothing compiled
+    assert counts["facesim.physics.solver._simulate__serial"][0] >= 1
+    assert (folder / "physics" / "notes.txt").read_text() == "mine" and (folder / "shipped.json").is_file()
+
+
+@pytest.mark.skipif(not SHIPPABLE, reason="the kernels ship compiled for x86-64 and Python 3.11")
 def test_a_new_users_first_words_over_an_expression_compile_nothing(tmp_path):
     """Words said over a smile: the jaw carries the skin as the smile shapes it, a rest
     shape rewritten each frame (facesim.physics.run). Handed to the kernels writable, it
