@@ -28,8 +28,11 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "out" / "posed_bake"
-SHAPES = ("mouthSmileLeft", "mouthSmileRight", "jawOpen", "mouthUpperUpLeft", "mouthUpperUpRight", "mouthStretchLeft",
-          "mouthStretchRight", "mouthDimpleLeft", "mouthDimpleRight", "mouthLowerDownLeft", "mouthLowerDownRight")
+#: Her photo's expression is fitted with these. With the upper lip's raise (mouthUpperUpLeft,
+#: -Right) too, the posed skin under her nose moved into her nostrils' shadow and baked a dark
+#: spot there, for much the same figures (docs/capture.md).
+SHAPES = ("mouthSmileLeft", "mouthSmileRight", "jawOpen", "mouthStretchLeft", "mouthStretchRight", "mouthDimpleLeft",
+          "mouthDimpleRight", "mouthLowerDownLeft", "mouthLowerDownRight")
 ROUNDS = 3
 #: Frames each pose is held by the physics (the capture's basis holds its shapes as long).
 HELD = 30
