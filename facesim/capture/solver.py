@@ -279,7 +279,7 @@ def _landmarks_at_rest(spec) -> tuple[np.ndarray, float]:
     from ..animation.simulate import model_for
 
     head = model_for(spec).mesh.head
-    return np.einsum("kj,kjd->kd", head.landmark_weight, head.vertices[head.landmark_vertex]), head.eyeball("left")[1]
+    return head.landmark_positions, head.eyeball("left")[1]
 
 
 def _rendered(spec, rest: np.ndarray, shapes: bool, angles: bool = True, look: str = "clay",
