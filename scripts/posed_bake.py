@@ -67,8 +67,7 @@ def photo_pose(image: np.ndarray, detected: np.ndarray):
         head = model.mesh.head
 
         def seen(vertices):
-            landmarks = np.einsum("kj,kjd->kd", head.landmark_weight, vertices[head.landmark_vertex])
-            return fit.camera.project(landmarks)
+            return fit.camera.project(dataclasses.replace(head, vertices=vertices).landmark_positions)
 
         at_rest = seen(rest)
         motion = np.stack([(seen(posed(identity, one)[0]) - at_rest).ravel() for one in np.eye(len(SHAPES))], axis=1)
@@ -89,7 +88,7 @@ def main() -> int:
     from facesim.capture.performance import capture
     from facesim.face.bake import bake
     from facesim.face.figure import atlas_uv, figure_for
-    from facesim.face.own_face import face_from_photo
+    from facesim.face.own_face import face_from_photo, head_obj
     from facesim.face.photo import detect_landmarks, read_image
     from facesim.renderer.scene import FaceRenderer
     from facesim.renderer.settings import RenderSettings
@@ -104,10 +103,13 @@ def main() -> int:
     fit, weights, (vertices, model) = photo_pose(image, detect_landmarks(image, str(photo), refine=True)[:, :2])
     print("her photo's expression:", {n: round(float(w), 2) for n, w in zip(SHAPES, weights) if w > 0.05}, flush=True)
     head = model.mesh.head
-    texture, onto = bake(dataclasses.replace(head, vertices=vertices), fit.camera, image, figure_for(model).colour,
-                         atlas_uv(head))
+    atlas = atlas_uv(head)
+    texture, onto = bake(dataclasses.replace(head, vertices=vertices), fit.camera, image, figure_for(model).colour, atlas)
     shutil.rmtree(posed_face, ignore_errors=True)
     shutil.copytree(face, posed_face)
+    # the identity fitted again: its neutral head, as face from-photo writes one
+    obj, _ = head_obj(head, atlas[0], atlas[2], "scripts/posed_bake.py: the astronaut's head, her expression fitted apart")
+    (posed_face / "head.obj").write_text(obj)
     iio.imwrite(posed_face / "head.png", texture)
     iio.imwrite(posed_face / "head_onto.png", onto)
     record = yaml.safe_load((posed_face / "face.yaml").read_text())
