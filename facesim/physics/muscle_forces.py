@@ -12,7 +12,7 @@ from numba import njit, prange
 
 from ..config import CHUNKS, LENGTH_EPS, NEGLIGIBLE_DELTA, NUMBA_OPTIONS, PARALLEL_OPTIONS
 from .muscles import SPHINCTER
-from .numerics import _chunk, _frame_point
+from .numerics import _chunk, _copy_rows, _frame_point
 
 
 @njit(**NUMBA_OPTIONS)
@@ -376,7 +376,7 @@ def _bones_moved(model, target, work):
                 break
     if same:
         return
-    work.bones[:] = target
+    _copy_rows(target, work.bones)
     work.known[0] = 1
     _forget_regions(work)
     _muscle_frame(model, target, work.attached)

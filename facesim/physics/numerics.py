@@ -49,6 +49,16 @@ def _not_finite(a):
 
 
 @njit(**NUMBA_OPTIONS)
+def _copy_rows(source, out):
+    """out[:] = source for two (rows, 3) arrays, as a loop: Numba's slice assignment
+    checks the shapes with an error message it formats, and compiling that message
+    (its strings' kernels) cost a render compiling from nothing 4-5 s (2026-12-08)."""
+    for i in range(source.shape[0]):
+        for d in range(3):
+            out[i, d] = source[i, d]
+
+
+@njit(**NUMBA_OPTIONS)
 def _squarable(exponent):
     """Whether ``_power`` raises to ``exponent`` by squaring: a whole number, 0 to 127."""
     return exponent == math.floor(exponent) and 0.0 <= exponent <= 127.0

@@ -357,7 +357,7 @@ def _implicit_step(model, state, control, h, xp, work, forces, krylov):
             else:
                 r[i, d] = h * (forces.force[i, d] - forces.damping[i] * v[i, d])
     _precondition(krylov, r, z)
-    p[:] = z
+    numerics._copy_rows(z, p)
     rz = _dot(r, z)
     residual = _dot(r, r)
     threshold = model.tolerance * model.tolerance * residual
