@@ -4,7 +4,9 @@ The command-line tests run hundreds of facesim commands, each in a process of it
 a user runs them; each paid for Python, NumPy, pydantic, Numba and facesim's imports and
 Numba's first kernel (0.4-0.6 s of CPU before the command's own work: `validate` 0.78-0.93
 s fresh against 0.26-0.28 s forked, 2026-12-07). A fork server per test worker pays that
-once: a Python that has imported facesim's command line and loaded one kernel, and for
+once: a Python that has imported facesim's command line, the modules a render imports
+(none of OpenGL) and MediaPipe's face mesh (0.7 s, in each photo or video command), and
+loaded one kernel, and for
 each command forks a child that runs ``python -m facesim`` as the interpreter would (its
 arguments, working directory and environment, its stdout and stderr to files, its exit
 code from SystemExit or an uncaught exception, atexit at its end; its CPU time, counted
@@ -43,11 +45,19 @@ prepare_numba()
 from facesim.geometry import _vertex_normals
 _vertex_normals(np.zeros((3, 3)), np.array([[0, 1, 2]], dtype=np.int64), np.empty((3, 3)))
 added = {k: v for k, v in os.environ.items() if k not in before}  # what facesim set for itself (prepare_numba)
+started = dict(os.environ)  # the environment a command starts in (OpenCV, imported below, adds its own)
+import facesim.animation.simulate, facesim.export.output, facesim.face.figure  # a render's modules, none of OpenGL
+try:
+    from facesim.face.photo import quiet_stderr
+    with quiet_stderr():
+        import mediapipe.python.solutions.face_mesh  # photos' and videos' commands: 0.7 s of imports
+except ImportError:
+    pass
 requests, answers = os.fdopen(os.dup(0), "r"), os.fdopen(os.dup(1), "w")
 null = os.open(os.devnull, os.O_RDWR)
 os.dup2(null, 0)
 os.dup2(null, 1)
-answers.write(json.dumps(dict(env=dict(os.environ), added=added)) + "\n")
+answers.write(json.dumps(dict(env=started, added=added)) + "\n")
 answers.flush()
 for line in requests:
     request = json.loads(line)
