@@ -4,9 +4,9 @@ The command-line tests run hundreds of facesim commands, each in a process of it
 a user runs them; each paid for Python, NumPy, pydantic, Numba and facesim's imports and
 Numba's first kernel (0.4-0.6 s of CPU before the command's own work: `validate` 0.78-0.93
 s fresh against 0.26-0.28 s forked, 2026-12-07). A fork server per test worker pays that
-once: a Python that has imported facesim's command line, the modules a render imports
-(none of OpenGL) and MediaPipe's face mesh (0.7 s, in each photo or video command), and
-loaded one kernel, and for
+once: a Python that has imported facesim's command line and the modules a render imports
+(none of OpenGL; for the commands that read faces in images, ``PHOTOS``, MediaPipe's
+face mesh too) and loaded one kernel, and for
 each command forks a child that runs ``python -m facesim`` as the interpreter would (its
 arguments, working directory and environment, its stdout and stderr to files, its exit
 code from SystemExit or an uncaught exception, atexit at its end; its CPU time, counted
@@ -47,12 +47,10 @@ _vertex_normals(np.zeros((3, 3)), np.array([[0, 1, 2]], dtype=np.int64), np.empt
 added = {k: v for k, v in os.environ.items() if k not in before}  # what facesim set for itself (prepare_numba)
 started = dict(os.environ)  # the environment a command starts in (OpenCV, imported below, adds its own)
 import facesim.animation.simulate, facesim.export.output, facesim.face.figure  # a render's modules, none of OpenGL
-try:
+if sys.argv[1:] == ["photos"]:  # the server of the commands that read faces in images, which import it first
     from facesim.face.photo import quiet_stderr
     with quiet_stderr():
-        import mediapipe.python.solutions.face_mesh  # photos' and videos' commands: 0.7 s of imports
-except ImportError:
-    pass
+        import mediapipe.python.solutions.face_mesh
 requests, answers = os.fdopen(os.dup(0), "r"), os.fdopen(os.dup(1), "w")
 null = os.open(os.devnull, os.O_RDWR)
 os.dup2(null, 0)
@@ -91,8 +89,8 @@ PASSED_ON = ("PYTEST_CURRENT_TEST", "PYOPENGL_PLATFORM", "EGL_PLATFORM")
 
 
 class _Server:
-    def __init__(self):
-        self.process = subprocess.Popen([sys.executable, "-c", SERVER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+    def __init__(self, kind: str):
+        self.process = subprocess.Popen([sys.executable, "-c", SERVER, kind], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                         text=True, env=dict(os.environ))
         self.folder = Path(tempfile.mkdtemp(prefix="facesim-forked-"))
         self.lock = threading.Lock()
@@ -139,7 +137,11 @@ class _Server:
         shutil.rmtree(self.folder, ignore_errors=True)
 
 
-_server: _Server | None = None
+#: The commands that read faces in images (MediaPipe's face mesh, which loads OpenGL's
+#: libraries of its own) before anything else: forked from a server that has imported
+#: it (0.7 s each), as they would import it first; any other command from one that has not.
+PHOTOS = (("face", "from-photo"), ("mesh", "from-photo"), ("capture",))
+_servers: dict[str, _Server] = {}
 #: CPU time (user + system, s) of the commands forked so far, with their own children's
 #: (ffmpeg's, a batch's workers'): the suite's table counts it with its subprocesses'.
 cpu = 0.0
@@ -148,13 +150,13 @@ cpu = 0.0
 def facesim_process(args: list, cwd=None, env=None, timeout: float = 600) -> subprocess.CompletedProcess:
     """``python -m facesim *args`` (captured, text), forked from the server when ``env``
     is this process's, else in a process of its own."""
-    global _server
     args = list(map(str, args))
     env = dict(os.environ) if env is None else env
-    if _server is None:
-        _server = _Server()
-        atexit.register(_server.close)
-    if _server.serves(env):
-        return _server.run(args, cwd, env, timeout)
+    kind = "photos" if any(tuple(args[:len(command)]) == command for command in PHOTOS) else "commands"
+    if kind not in _servers:
+        _servers[kind] = _Server(kind)
+        atexit.register(_servers[kind].close)
+    if _servers[kind].serves(env):
+        return _servers[kind].run(args, cwd, env, timeout)
     return subprocess.run([sys.executable, "-m", "facesim", *args], capture_output=True, text=True, cwd=cwd, env=env,
                           timeout=timeout)
