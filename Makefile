@@ -37,11 +37,13 @@ tests/js/node_modules/.installed: tests/js/package.json tests/js/package-lock.js
 # works as ever (tests/test_install.py)
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
+
+$(BIN)/uv: | $(BIN)/python
 	$(BIN)/pip install -q uv
 
 INSTALL := $(BIN)/uv pip install -q --python $(BIN)/python
 
-$(BIN)/facesim: pyproject.toml | $(BIN)/python
+$(BIN)/facesim: pyproject.toml | $(BIN)/uv
 	$(INSTALL) -e '.[test]'
 	@touch $@
 
@@ -50,7 +52,7 @@ $(BIN)/facesim: pyproject.toml | $(BIN)/python
 # the rest, leaving Python to compile the bytecode of what is imported when it first is
 # (a fresh clone's `make test` installed twice, compiling all of it: 65 s; then 26 s, and
 # the first imports about 8 s more, once)
-$(VENV)/.photo: pyproject.toml | $(BIN)/python
+$(VENV)/.photo: pyproject.toml | $(BIN)/uv
 	$(INSTALL) -e '.[test,photo]'
 	@touch $@ $(BIN)/facesim
 
