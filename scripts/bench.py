@@ -1192,7 +1192,7 @@ def main() -> int:
     parser.add_argument("--json", type=Path, help="also write the figures as JSON (the smoke test reads them)")
     args = parser.parse_args()
     quick = args.quick
-    repeats = 2 if quick else 7
+    repeats = 1 if quick else 7
     started = time.perf_counter()
     sections = []
 
@@ -1228,7 +1228,7 @@ def main() -> int:
     section("Compilation, measured apart", text + "\n\nEach row is one fresh process; `cache=True` keeps compiled "
             "kernels on disk, so only the first run of this code on a machine pays for compilation, whichever copy "
             "of facesim runs it (facesim.config).")
-    text, first = first_run(1 if quick else 3, 2 if quick else 7, quick)
+    text, first = first_run(1 if quick else 3, 1 if quick else 7, quick)
     section("First run: a new user's first render, and the ones after", text + "\n\nfacesim built into a wheel "
             "and installed on its own (`pip install --target`), its dependencies this environment's; each first run "
             "in a new HOME and XDG_CACHE_HOME, with no NUMBA_CACHE_DIR or FACESIM_CACHE; the later runs in the last "
