@@ -1068,6 +1068,30 @@ script.
   everything again; facesim's own cache locator files them by a hash of the code and the
   package's name instead (facesim.config), and a copy elsewhere now loads them (a fresh
   render from a copy: 87 s -> 2.7 s; tests/test_cache.py).
+- **`make test` from a fresh clone in 6 minutes (setup included; the Debian packages
+  installed, facesim's user cache as this machine's earlier runs left it): met, 5 min
+  55.5 s (pytest 345 s), 2026-12-08.** Seven CI runs the day before took 7 min 3 s to 7
+  min 37 s; after the first four of the changes below 6 min 8.6 s and 6 min 8.2 s, then
+  5 min 55.5 s. Each measured side by side: the venv's packages installed by uv, the same
+  versions pip chose (the setup 22.7 -> 9.4 s); the command-line tests' fork server
+  importing a render's modules before it forks, and MediaPipe's face mesh in a second
+  server for the commands that read faces in images, which import it first (the
+  command-line, faults, README, photo and capture modules 237 -> 214 s of the workers'
+  wall); the install test's pip not compiling every module's bytecode (35 -> 22 s); the
+  benchmark's smoke test timing each thing once (57 -> 49.5 s alone); and two cuts in
+  what compiling the physics costs, found with Numba's compile events (a kernel's
+  exclusive time): a slice copy's formatted error message and its strings' kernels (3 s),
+  and the implicit step's machine code emitted once, inlined into the loop that calls it
+  (8 s: a render compiling from nothing 63-65 -> 55.5 s). Where the suite's time goes
+  now (the CPU of its two workers, 627 s): compiling the physics from nothing once
+  (61-67 s, what the test of what a render compiles needs), the fold test's 591 pairs of
+  action units held 200 frames each (67-72 s: 0.55 ms a step on the head, of which four
+  triangular solves of the rest factor, 65 µs each, whether it is read from L and U or from L
+  alone, so not bound by memory), the benchmark's smoke test (50-56 s) and the wheel
+  installed into a new venv (22 s). Tried, not kept: three workers on the two cores
+  (358 s against 357, 4% more CPU). A machine with an empty user cache also compiles the
+  kernels the tests call directly and the shipped set lacks, and measures the capture's
+  subjects: about a minute more (428-466 s against 371-385 s locally, 2026-12-07).
 - **The head's frame against its floor, 1.2x: met, 0.94x at 256² and 1.13x at 512² in
   this run (1.00x and 1.02x in the run before, 0.93x and 1.04x in the quiet run of 19:07;
   1.02x and 1.07x, 1.02x and 1.06x in the two before that; 1.01x and 1.06x,
