@@ -67,7 +67,10 @@ demo: setup
 # and Python's bytecode cached, as a user's machine does (a sandbox that sets
 # PYTHONDONTWRITEBYTECODE compiled facesim's source again in each of the suite's hundreds of
 # processes: a warm render's imports 0.84 s against 0.67 s)
-test: test-packages $(VENV)/.photo tests/js/node_modules/.installed
+# (the Python packages and the tests' npm packages installed side by side: one waits on
+# the network and the disk while the other unpacks)
+test:
+	@$(MAKE) --no-print-directory -j2 test-packages $(VENV)/.photo tests/js/node_modules/.installed
 	OPENBLAS_NUM_THREADS=1 PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest -n 2 --dist loadscope --no-loadscope-reorder --durations=15
 
 bench: setup
