@@ -1078,7 +1078,8 @@ script.
   CI runs the day before took 7 min 3 s to 7 min 37 s; after the first four of the
   changes below 6 min 8.6 s and 6 min 8.2 s, then the three above: a margin of 0.1 to 5
   s, less than this machine's noise between runs (the seven varied by 34 s). Each measured side by side: the venv's packages installed by uv, the same
-  versions pip chose (the setup 22.7 -> 9.4 s); the command-line tests' fork server
+  versions pip chose (the setup 22.7 -> 9.4 s, and 6.5 s with the tests' npm packages
+  installed beside them, make -j2); the command-line tests' fork server
   importing a render's modules before it forks, and MediaPipe's face mesh in a second
   server for the commands that read faces in images, which import it first (the
   command-line, faults, README, photo and capture modules 237 -> 214 s of the workers'
